@@ -1,0 +1,1 @@
+"""Drake LeafSystems, each beside the pure-numpy core it wraps."""
