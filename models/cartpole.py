@@ -1,7 +1,7 @@
 """Cart-pole with two soft walls as an LCS (the paper's synthetic example).
 
 State x = [cart_x (m), pole_theta (rad), cart_xdot (m/s), pole_thetadot (rad/s)],
-input u = [cart_force (N)], lambda = [left wall force, right wall force] (N).
+input u = [cart_force (N)], lambda = [right (+x) wall force, left (-x) wall force] (N).
 Numbers are those of the C3 authors' public cart-pole (see DESIGN.md section 4).
 """
 from __future__ import annotations
@@ -14,7 +14,9 @@ from adaptive_c3.systems.lcs import Lcs
 
 STATE_NAMES = ("cart_x", "pole_theta", "cart_xdot", "pole_thetadot")
 INPUT_NAMES = ("cart_force",)
-LAMBDA_NAMES = ("left_wall", "right_wall")
+# lambda[0] acts when the pole tip x - l*theta passes +wall_distance (the wall on the
+# +x side), lambda[1] when it passes -wall_distance (the wall on the -x side).
+LAMBDA_NAMES = ("right_wall", "left_wall")
 
 
 @dataclass(frozen=True)

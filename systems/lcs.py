@@ -34,6 +34,10 @@ def _frozen(name: str, value, ndim: int) -> np.ndarray:
     return arr
 
 
+def _mode(values):
+    return max(values, key=values.count)   # ties: the first listed wins
+
+
 @dataclass(frozen=True)
 class Lcs:
     """One linear complementarity system; n states, k inputs, m contact forces."""
@@ -52,9 +56,12 @@ class Lcs:
         ndims = dict(A=2, B=2, D=2, d=1, E=2, F=2, H=2, c=1)
         for name in _NAMES:
             object.__setattr__(self, name, _frozen(name, getattr(self, name), ndims[name]))
-        n = self.A.shape[0]
-        k = self.B.shape[1]
-        m = self.D.shape[1]
+        # sizes by majority vote, so that the one inconsistent matrix is the one named
+        n = _mode([self.A.shape[0], self.A.shape[1], self.B.shape[0], self.D.shape[0],
+                   self.d.shape[0], self.E.shape[1]])
+        m = _mode([self.D.shape[1], self.E.shape[0], self.F.shape[0], self.F.shape[1],
+                   self.H.shape[0], self.c.shape[0]])
+        k = _mode([self.B.shape[1], self.H.shape[1]])
         expected = dict(A=(n, n), B=(n, k), D=(n, m), d=(n,), E=(m, n), F=(m, m),
                         H=(m, k), c=(m,))
         for name in _NAMES:

@@ -1,0 +1,151 @@
+"""The `adaptive-c3` command line.
+
+Every user mistake (bad scenario, bad recording, bad flag) ends with one line
+on stderr and exit code 2; anything else is a bug and shows its traceback.
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import json
+import sys
+from pathlib import Path
+
+USER_ERROR = 2
+
+BENCH_SUITES = {   # suite -> module exposing run_bench(quick) -> list of rows
+    "lcp": "adaptive_c3.tools.bench_lcp",
+    "c3": "adaptive_c3.tools.bench_c3",
+    "learner": "adaptive_c3.tools.bench_learner",
+    "lcs": "adaptive_c3.tools.bench_lcs",
+    "loop": "adaptive_c3.tools.bench_loop",
+    "sweep": "adaptive_c3.tools.bench_sweep",
+}
+
+
+class UserError(Exception):
+    """Raised for mistakes the user can fix; printed as one line."""
+
+
+def _user_error_types():
+    from adaptive_c3.scenarios.schema import ScenarioError
+    from adaptive_c3.tools.recording import RecordingError
+    from adaptive_c3.systems.lcs import LcsError
+    return (UserError, ScenarioError, RecordingError, LcsError)
+
+
+def _scenario_help() -> str:
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, shipped_scenarios
+    names = shipped_scenarios()
+    return ("shipped scenarios (in " + str(SCENARIO_DIR) + "): " + ", ".join(names)) if names else ""
+
+
+def resolve_scenario_path(name: str) -> Path:
+    """A path as given, or the name of a shipped scenario."""
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR
+    path = Path(name)
+    if path.is_file():
+        return path
+    for candidate in (SCENARIO_DIR / name, SCENARIO_DIR / f"{name}.yaml", SCENARIO_DIR / path.name):
+        if candidate.is_file():
+            return candidate
+    raise UserError(f"scenario file not found: {name}")
+
+
+def cmd_run(args) -> int:
+    from adaptive_c3.tools.run import run_scenario
+    overrides = list(args.set or [])
+    if args.seed is not None:
+        overrides.append(f"seed={args.seed}")
+    summary, out = run_scenario(resolve_scenario_path(args.scenario), args.out, overrides,
+                                meshcat=args.meshcat)
+    print(json.dumps({k: summary[k] for k in summary if k in
+                      ("scenario", "stabilised", "laps", "residual_final", "real_time_factor")},
+                     default=float))
+    print(f"results in {out}: summary.json, log.npz, " + ", ".join(summary.get("plots", [])))
+    return 0
+
+
+def cmd_bench(args) -> int:
+    from adaptive_c3.tools.bench import run_suites
+    suites = list(BENCH_SUITES) if args.suite == "all" else [args.suite]
+    run_suites({s: BENCH_SUITES[s] for s in suites}, json_path=args.json, quick=args.quick)
+    return 0
+
+
+def _delegate(module: str, func: str):
+    def run(args):
+        try:
+            mod = importlib.import_module(module)
+        except ModuleNotFoundError as e:
+            if e.name and e.name.startswith("adaptive_c3"):
+                raise UserError(f"this command is not available in this build ({e.name} missing)")
+            raise
+        return getattr(mod, func)(args)
+    return run
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="adaptive-c3",
+        description="Adaptive contact-implicit MPC (C3) with online residual learning, on Drake.")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    run = sub.add_parser("run", help="simulate a scenario headless (or in Meshcat)",
+                         description="Simulate a scenario and write summary.json, log.npz and plots. "
+                         + _scenario_help())
+    run.add_argument("scenario", help="scenario YAML (a path, or the name of a shipped one)")
+    run.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<time>)")
+    run.add_argument("--set", action="append", metavar="KEY.PATH=VALUE",
+                     help="override a scenario key; the value is parsed as YAML (repeatable)")
+    run.add_argument("--meshcat", action="store_true", help="visualise in Meshcat on localhost")
+    run.add_argument("--seed", type=int, default=None, help="random seed (overrides the scenario's)")
+    run.set_defaults(func=cmd_run)
+
+    sweep = sub.add_parser("sweep", help="run a sweep of trials")
+    sweep.add_argument("sweep_file")
+    sweep.add_argument("--workers", type=int, default=1)
+    sweep.add_argument("--out", default=None)
+    sweep.add_argument("--set", action="append", metavar="KEY.PATH=VALUE")
+    sweep.add_argument("--cluster", default=None, help="address of a running distributed scheduler")
+    sweep.set_defaults(func=_delegate("adaptive_c3.tools.sweep", "cmd_sweep"))
+
+    bench = sub.add_parser("bench", help="benchmarks, as ratios against baselines measured in the same run")
+    bench.add_argument("suite", nargs="?", default="all", choices=["all", *BENCH_SUITES])
+    bench.add_argument("--json", default=None, help="write the results to this JSON file")
+    bench.add_argument("--quick", action="store_true", help="fewer repeats (a smoke test)")
+    bench.set_defaults(func=cmd_bench)
+
+    diag = sub.add_parser("diagnose", help="find where a recording and the model disagree")
+    diag.add_argument("recording")
+    diag.add_argument("--scenario", required=True)
+    diag.add_argument("--out", default=None)
+    diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnose", "cmd_diagnose"))
+
+    hw = sub.add_parser("hardware", help="LCM bridge to a real Franka driver")
+    hw.add_argument("scenario")
+    hw.add_argument("--lcm-url", required=True)
+    hw.set_defaults(func=_delegate("adaptive_c3.tools.hardware", "cmd_hardware"))
+
+    gm = sub.add_parser("gradient-map", help="the paper's Fig. 3 for the cart-pole")
+    gm.add_argument("--out", default="runs/gradient_map")
+    gm.set_defaults(func=_delegate("adaptive_c3.tools.gradient_map", "cmd_gradient_map"))
+    return p
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)   # argparse itself exits with code 2 on bad flags
+    try:
+        return int(args.func(args) or 0)
+    except _user_error_types() as e:
+        msg = " ".join(str(e).split())
+        print(f"adaptive-c3 {args.command}: error: {msg}", file=sys.stderr)
+        return USER_ERROR
+    except KeyboardInterrupt:
+        print(f"adaptive-c3 {args.command}: interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
