@@ -31,7 +31,8 @@ def _user_error_types():
     from adaptive_c3.scenarios.schema import ScenarioError
     from adaptive_c3.tools.recording import RecordingError
     from adaptive_c3.systems.lcs import LcsError
-    return (UserError, ScenarioError, RecordingError, LcsError)
+    from adaptive_c3.tools.sweep import SweepError
+    return (UserError, ScenarioError, RecordingError, LcsError, SweepError)
 
 
 def _scenario_help() -> str:

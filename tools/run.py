@@ -28,7 +28,10 @@ def run_scenario(path, out=None, overrides=(), meshcat: bool = False):
     runner = getattr(importlib.import_module(module), func)
     kwargs = {"meshcat": True} if meshcat else {}
     summary = runner(scenario, text, out, **kwargs)
-    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=_json_default))
+    # written last and atomically: its presence means the run completed (sweeps rely on it)
+    tmp = out / "summary.json.tmp"
+    tmp.write_text(json.dumps(summary, indent=2, default=_json_default))
+    tmp.replace(out / "summary.json")
     return summary, out
 
 
