@@ -39,7 +39,6 @@ from pydrake.autodiffutils import AutoDiffXd, ExtractGradient, ExtractValue, \
     InitializeAutoDiff
 from pydrake.geometry import GeometryId, Role
 from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces_
-from scipy.linalg import solve_triangular
 
 from adaptive_c3.systems.lcs import Lcs
 
@@ -72,7 +71,11 @@ class AnitescuTerms:
 
 
 class AnitescuLinearizer:
-    """Builds Anitescu LCSs of a plant; all contexts and seeds are made once here."""
+    """Builds Anitescu LCSs of a plant; all contexts and seeds are made once here.
+
+    The linearizer owns its (double and AutoDiff) contexts: give each system or thread
+    its own instance. `linearize(x, u, dt=...)` may override the step per call.
+    """
 
     def __init__(self, diagram, plant, contact_pairs, num_edges: int = 4,
                  dt: float = 0.1, eps_c: float = 1e-2):
@@ -181,7 +184,7 @@ class AnitescuLinearizer:
         return x, u
 
     def smooth_dynamics(self, x, u):
-        """(f, J_f, M): f = M⁻¹(Bu − Cv + τ_app) and its Jacobian wrt (q, v, u)."""
+        """(f, J_f, M, M⁻¹): f = M⁻¹(Bu − Cv + τ_app) and J_f = ∂f/∂(q, v, u)."""
         x, u = self._check(x, u)
         plant_ad, ctx_ad = self._plant_ad, self._plant_context_ad
         plant_ad.SetPositionsAndVelocities(ctx_ad, InitializeAutoDiff(x).reshape(-1))
@@ -194,15 +197,15 @@ class AnitescuLinearizer:
         dM = ExtractGradient(M_ad.reshape(-1)).reshape(nv, nv, nx)
         b = ExtractValue(b_ad).reshape(nv)
         db = ExtractGradient(b_ad).reshape(nv, nx)
-        L = np.linalg.cholesky(M)
-        r = self._B_act @ u - b
-        f = _chol_solve(L, r)
+        M_inv = np.linalg.inv(M)  # small and SPD; one inverse serves every solve
+        M_inv = 0.5 * (M_inv + M_inv.T)
+        f = M_inv @ (self._B_act @ u - b)
         # d(M f) = dr  =>  M df = dr − dM f
         rhs = np.empty((nv, nx + self.nu))
         rhs[:, :nx] = -db - np.einsum("ijk,j->ik", dM, f)
         rhs[:, nx:] = self._B_act
-        J_f = _chol_solve(L, rhs)
-        return f, J_f, M, L
+        J_f = M_inv @ rhs
+        return f, J_f, M, M_inv
 
     def contact_geometry(self, x):
         """(φ [n_c], J_n [n_c, n_v], J_t [n_c n_e, n_v], normals [n_c, 3]) at x."""
@@ -252,14 +255,14 @@ class AnitescuLinearizer:
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         nq, nv, nx, nu = self.nq, self.nv, self.nx, self.nu
-        f, J_f, M, L = self.smooth_dynamics(x, u)
+        f, J_f, M, M_inv = self.smooth_dynamics(x, u)
         phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
         N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
         N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
 
         q_star = x[:nq]
         J_c = self._E_t.T @ J_n + self._mu_edges[:, None] * J_t
-        MinvJcT = _chol_solve(L, J_c.T)
+        MinvJcT = M_inv @ J_c.T
         Jf_q, Jf_v, Jf_u = J_f[:, :nq], J_f[:, nq:nx], J_f[:, nx:]
         d_v = f - J_f @ np.concatenate([x, u])
 
@@ -289,15 +292,11 @@ class AnitescuLinearizer:
         return AnitescuTerms(lcs, phi, J_n, J_t, J_c, J_f, f, M, N, N_plus, normals)
 
 
-def _chol_solve(L: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve (L Lᵀ) x = b for a lower-triangular Cholesky factor L."""
-    y = solve_triangular(L, b, lower=True, check_finite=False)
-    return solve_triangular(L.T, y, lower=False, check_finite=False)
-
-
 def _tangents(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Orthonormal t1, t2 with t2 = n × t1; t1 follows world x (world y near n = ±x)."""
     a = np.array([1.0, 0.0, 0.0]) if abs(n[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
     t1 = a - (a @ n) * n
     t1 /= np.linalg.norm(t1)
-    return t1, np.cross(n, t1)
+    t2 = np.array([n[1] * t1[2] - n[2] * t1[1], n[2] * t1[0] - n[0] * t1[2],
+                   n[0] * t1[1] - n[1] * t1[0]])
+    return t1, t2

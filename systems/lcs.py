@@ -73,6 +73,13 @@ class Lcs:
         if not np.isfinite(self.dt) or self.dt < 0:
             raise LcsError(f"LCS dt must be finite and >= 0, got {self.dt}")
 
+    # Immutable: copies (e.g. through Drake's abstract ports) can share the arrays.
+    def __copy__(self):
+        return self
+
+    def __deepcopy__(self, memo):
+        return self
+
     # --- sizes -------------------------------------------------------------
     @property
     def num_states(self) -> int:

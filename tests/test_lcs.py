@@ -95,3 +95,11 @@ def test_cartpole_hits_right_wall_with_model_sized_force():
     x_next, _ = lcs.step(xk, [0.0])
     x_free = lcs.A @ xk
     assert x_next[3] > x_free[3]
+
+
+def test_copy_through_abstract_value_stays_read_only():
+    from pydrake.common.value import Value
+    lcs = cartpole_lcs()
+    copied = Value[object](lcs).Clone().get_value()
+    with pytest.raises(ValueError):
+        copied.F[0, 0] = 1.0
