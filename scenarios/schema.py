@@ -194,10 +194,15 @@ def _check_value(hint, value, path: str) -> None:
             raise ScenarioError(f"{path}: expected a string, got {value!r}")
 
 
+def _register_builtin_tasks():
+    import adaptive_c3.scenarios.ball_rolling_schema  # noqa: F401  (registers itself)
+
+
 def load_scenario(path, overrides: list[str] = ()):
     """Load, include, override, type-check and validate a scenario file.
 
     Returns (scenario dataclass, merged YAML text)."""
+    _register_builtin_tasks()
     path = Path(path)
     data = _read_yaml(path.resolve())
     for text in overrides:

@@ -15,7 +15,7 @@ The inner problem is a strictly convex QP in y = (lam, eta) with simple bounds w
 
 How the QP is solved (exactly, not approximately):
 
-* Scaling. eps can be 1e-7, so the objective spans ~1e9 orders of magnitude. We solve
+* Scaling. eps can be 1e-7, so the unscaled objective mixes terms ~9 orders of magnitude apart. We solve
   J(y) = eps * l(y) = 1/2 y' H y + g' y + const instead, with
       H = [[eps D'Qd D + F'F/gamma, I - F'/gamma], [I - F/gamma, I/gamma]],
       g = [eps D'Qd z + F'(q + r)/gamma, -(q + r)/gamma],
@@ -46,14 +46,25 @@ dt = 0.01 moves positions by dt*velocity, so D (and z from contact) sit almost e
 in the velocity rows; Q_d = I weights the velocity error and is what we use (positions
 add nothing that velocities do not already show).
 
-About eps: for small eps the QP enforces complementarity and l_eps tends to the model's
-one-step prediction error; the gradient is then O(1/(eps gamma)) where model or data say
-contact, and O(1/distance) where only the data does (the contact-only case). Adam
-normalises the magnitude, so eps mostly sets the relative weight of those two cases.
+About eps (and Q_d). The minimiser (lam*, eta*) depends on eps only through eps Q_d;
+eps alone scales l and dl/dr by 1/eps, which Adam's normalisation ignores. Where the
+model (with r) predicts no contact, q + r >= 0, the KKT conditions of lam = 0,
+eta = q + r show the gradient is exactly zero iff also
+    q + r + eps D'Qd z >= 0.
+Where the model predicts contact ("both" with a wrong model, "predicted only") the
+gradient is nonzero for any eps (it vanishes only where the model explains the data). Where only the data has contact (z = -D lam_true) it
+is nonzero only where the model's gap q + r is below eps (D'Qd D lam_true): next to the
+true contact boundary (lam_true -> 0) there is always a band of zero gradient, of width
+|dc| / (1 + eps a k) in the contact distance (dc the model's offset error,
+a = (D'Qd D)_ii, k the contact stiffness). Cart-pole with Q_d = I (a = 8.1e-3, k = 50,
+dc = 0.15 m): eps = 1e-3 leaves the whole contact-only region flat, eps = 1 about 70 % of it, eps = 100 a band of 3.7 mm of pole-tip travel.
+So for the cart-pole use Q_d = I, eps = 100 (the dynamics and violation terms are then
+of the same size), gamma = 1e-2 (sigma_min(F + F') = 0.04). The paper's eps = 1e-7 goes
+with Q_d = 1e5 and the ball's much larger D.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Iterable, Sequence
 
 import numpy as np
@@ -63,7 +74,7 @@ from adaptive_c3.systems.lcs import Lcs
 __all__ = [
     "KKT_TOL", "LearnerOptions", "PreparedSample", "SampleSolution", "StepResult",
     "ViolationLossLearner", "adam_update", "batch_loss_and_grad", "check_epsilon",
-    "check_gamma", "prepare_sample", "qd_matrix", "solve_sample", "violation_loss",
+    "check_gamma", "prepare_sample", "qd_matrix", "solve_batch", "solve_sample", "violation_loss",
 ]
 
 KKT_TOL = 1e-8  # natural KKT residual allowed in the eps-scaled QP (see module doc)
@@ -75,8 +86,10 @@ _MAX_PIVOTS = 500
 class LearnerOptions:
     """Hyper-parameters of the residual learner.
 
-    epsilon: LCP violation weight eps > 0 (paper 1e-7, reference code 2e-5).
-    gamma: 0 < gamma < sigma_min(F + F') of every sample's F (checked per sample).
+    epsilon: LCP violation weight eps > 0 (ball rolling: paper 1e-7, reference code 2e-5;
+        cart-pole with Q_d = I: 100, see the module doc). Required.
+    gamma: 0 < gamma < sigma_min(F + F') of every sample's F (checked per sample);
+        1e-2 for both tasks. Required.
     learning_rate: Adam step size xi.
     batch_size: n_b, transitions per batch (the ring buffer length).
     Qd: state-error weight: None -> identity, a scalar -> s I, a length-n list -> diag,
@@ -86,8 +99,8 @@ class LearnerOptions:
     beta1, beta2, adam_eps: Adam's moment decays and denominator guard.
     """
 
-    epsilon: float = 1e-3
-    gamma: float = 1e-2
+    epsilon: float
+    gamma: float
     learning_rate: float = 1e-3
     batch_size: int = 10
     Qd: object = None
@@ -105,9 +118,11 @@ class LearnerOptions:
         lr = float(self.learning_rate)
         if not np.isfinite(lr) or lr <= 0:
             raise ValueError(f"learner learning_rate must be > 0, got {lr}")
-        if int(self.batch_size) != self.batch_size or int(self.batch_size) < 1:
+        if (isinstance(self.batch_size, bool) or int(self.batch_size) != self.batch_size
+                or int(self.batch_size) < 1):
             raise ValueError(f"learner batch_size must be a positive integer, got "
                              f"{self.batch_size}")
+        object.__setattr__(self, "batch_size", int(self.batch_size))
         ms = float(self.max_step)
         if not np.isfinite(ms) or ms <= 0:
             raise ValueError(f"learner max_step must be > 0, got {ms}")
@@ -186,10 +201,13 @@ class PreparedSample:
     """One transition turned into its QP data (the r-independent parts).
 
     Holds z, q, D, F, Q_d, the eps-scaled Hessian H and b = eps D'Qd z. `free` is the
-    warm-start guess of the free set (updated by every solve; results do not depend on it).
+    warm-start guess of the free set and `_inv` caches the inverses of H's principal
+    blocks for recently used free sets (updated by every solve; results never depend on
+    them, only speed).
     """
 
-    __slots__ = ("z", "q", "D", "F", "Qd", "H", "b", "epsilon", "gamma", "free")
+    __slots__ = ("z", "q", "D", "F", "Qd", "H", "b", "epsilon", "gamma", "free", "FtG",
+                 "_inv")
 
     def __init__(self, z, q, D, F, Qd, epsilon, gamma):
         m = q.shape[0]
@@ -204,9 +222,23 @@ class PreparedSample:
         H[m:, m:] = inv_g * np.eye(m)
         self.H = 0.5 * (H + H.T)
         self.b = epsilon * (QD.T @ z)
+        self.FtG = F.T * inv_g
         free = np.zeros(2 * m, dtype=bool)
         free[m:] = True  # the "no contact" guess: lam = 0, eta = q + r
         self.free = free
+        self._inv = {}
+
+    def reduced_inverse(self, free):
+        """(indices, inverse of H[free, free]) for a free set, cached."""
+        key = free.tobytes()
+        hit = self._inv.get(key)
+        if hit is None:
+            idx = np.flatnonzero(free)
+            inv = np.linalg.inv(self.H[np.ix_(idx, idx)]) if idx.size else None
+            if len(self._inv) >= 8:
+                self._inv.clear()
+            hit = self._inv[key] = (idx, inv)
+        return hit
 
 
 def prepare_sample(x_next, x, u, lcs: Lcs, epsilon: float, gamma: float,
@@ -223,8 +255,7 @@ def prepare_sample(x_next, x, u, lcs: Lcs, epsilon: float, gamma: float,
     for name, v, size in (("x_next", x_next, n), ("x", x, n), ("u", u, k)):
         if v.shape != (size,):
             raise ValueError(f"transition {name} has {v.size} entries, the LCS expects {size}")
-    if not (np.all(np.isfinite(x_next)) and np.all(np.isfinite(x))
-            and np.all(np.isfinite(u))):
+    if not (np.isfinite(x_next).all() and np.isfinite(x).all() and np.isfinite(u).all()):
         return None
     if check:
         check_epsilon(epsilon)
@@ -252,28 +283,32 @@ class SampleSolution:
     iterations: int
 
 
-def _pivot(H, g, free, tol):
-    """Block principal pivoting for min 1/2 y'Hy + g'y s.t. y >= 0 (H PD)."""
-    y = np.zeros(g.shape[0])
+def _pivot(s: PreparedSample, g, tol):
+    """Block principal pivoting for min 1/2 y'Hy + g'y s.t. y >= 0 (H PD).
+
+    Returns (y, free, rounds). Starts from s.free.
+    """
+    H = s.H
+    free = s.free
     best = g.shape[0] + 1
     backup = 3
     for it in range(1, _MAX_PIVOTS + 1):
-        y[:] = 0.0
-        idx = np.flatnonzero(free)
-        if idx.size:
-            y[idx] = np.linalg.solve(H[np.ix_(idx, idx)], -g[idx])
+        idx, inv = s.reduced_inverse(free)
+        y = np.zeros(g.shape[0])
+        if inv is not None:
+            y[idx] = -(inv @ g[idx])
         grad = H @ y + g
         bad = np.where(free, y < -tol, grad < -tol)
-        nbad = int(np.count_nonzero(bad))
-        if nbad == 0:
+        if not bad.any():
             return y, free, it
+        nbad = int(np.count_nonzero(bad))
         if nbad < best:
             best, backup = nbad, 3
             free = free ^ bad
         elif backup > 0:
             backup -= 1
             free = free ^ bad
-        else:  # Murty's least-index rule (here: the largest index), finite for P-matrices
+        else:  # Murty's least-index rule (on the largest index), finite for P-matrices
             j = np.flatnonzero(bad)[-1]
             free = free.copy()
             free[j] = not free[j]
@@ -281,42 +316,41 @@ def _pivot(H, g, free, tol):
                        f"in {_MAX_PIVOTS} rounds")
 
 
+def _polish(s: PreparedSample, y, qr, g):
+    """Clip lam at 0, set eta to its closed-form optimum; returns (lam, eta, w0, y, kkt)."""
+    m = qr.shape[0]
+    lam = np.maximum(y[:m], 0.0)
+    w0 = qr + s.F @ lam
+    eta = np.maximum(w0 - s.gamma * lam, 0.0)
+    y = np.concatenate((lam, eta))
+    kkt = float(np.abs(np.minimum(y, s.H @ y + g)).max())
+    return lam, eta, w0, y, kkt
+
+
 def solve_sample(s: PreparedSample, r) -> SampleSolution:
     """Solve the inner QP of one prepared sample at residual r (exact; see module doc)."""
     m = s.q.shape[0]
     gam, eps = s.gamma, s.epsilon
     qr = s.q + r
-    g = np.empty(2 * m)
-    g[:m] = s.b + (s.F.T @ qr) / gam
-    g[m:] = -qr / gam
-    H = s.H
+    g = np.concatenate((s.b + s.FtG @ qr, qr * (-1.0 / gam)))
     tol = 1e-13 * max(1.0, float(np.abs(g).max()))
-    y, free, its = _pivot(H, g, s.free, tol)
-    lam = np.maximum(y[:m], 0.0)
-    w0 = qr + s.F @ lam
-    eta = np.maximum(w0 - gam * lam, 0.0)
-    y = np.concatenate((lam, eta))
-    kkt = float(np.abs(np.minimum(y, H @ y + g)).max())
+    y, free, its = _pivot(s, g, tol)
+    lam, eta, w0, y, kkt = _polish(s, y, qr, g)
     if kkt > KKT_TOL:
         # one refinement step on the identified free set, then re-polish
         idx = np.flatnonzero(y > 0)
         if idx.size:
-            r_res = H @ y + g
-            y[idx] -= np.linalg.solve(H[np.ix_(idx, idx)], r_res[idx])
-        lam = np.maximum(y[:m], 0.0)
-        w0 = qr + s.F @ lam
-        eta = np.maximum(w0 - gam * lam, 0.0)
-        y = np.concatenate((lam, eta))
-        kkt = float(np.abs(np.minimum(y, H @ y + g)).max())
+            res = s.H @ y + g
+            y[idx] -= np.linalg.solve(s.H[np.ix_(idx, idx)], res[idx])
+        lam, eta, w0, y, kkt = _polish(s, y, qr, g)
         if kkt > KKT_TOL:
             raise RuntimeError(f"violation-loss QP: KKT residual {kkt:.3g} > {KKT_TOL:g} "
                                "(gamma too close to sigma_min(F + F')?)")
     s.free = free
-    w = np.minimum(w0, gam * lam)  # = w0 - eta exactly where eta = 0 or eta > 0
+    w = np.minimum(w0, gam * lam)  # = w0 - eta exactly, whether eta = 0 or eta > 0
     e = s.D @ lam + s.z
     loss = 0.5 * float(e @ (s.Qd @ e)) + (float(lam @ eta) + float(w @ w) / (2 * gam)) / eps
-    grad = w / (eps * gam)
-    return SampleSolution(lam, eta, loss, grad, w, kkt, its)
+    return SampleSolution(lam, eta, loss, w / (eps * gam), w, kkt, its)
 
 
 def violation_loss(x_next, x, u, lcs: Lcs, r, epsilon: float, gamma: float,
@@ -329,6 +363,86 @@ def violation_loss(x_next, x, u, lcs: Lcs, r, epsilon: float, gamma: float,
     return sol.loss, sol.grad
 
 
+def solve_batch(samples: Sequence[PreparedSample], r):
+    """Solve the QPs of several samples (same m and n) at r together, vectorised.
+
+    The same block pivoting as `solve_sample`, run on all samples at once: a free set F
+    is solved as the masked system (H on F x F, identity elsewhere) with one batched
+    LU call per round. Returns (lam [B, m], eta [B, m], loss [B], grad [B, m], kkt [B]).
+    Samples whose batched solve misses KKT_TOL are re-solved one by one (with refinement).
+    """
+    B = len(samples)
+    m = samples[0].q.shape[0]
+    nv = 2 * m
+    r = np.asarray(r, float)
+    H = np.stack([s.H for s in samples])
+    F = np.stack([s.F for s in samples])
+    gam = np.array([s.gamma for s in samples])
+    eps = np.array([s.epsilon for s in samples])
+    qr = np.stack([s.q for s in samples]) + r
+    g = np.empty((B, nv))
+    g[:, :m] = np.stack([s.b for s in samples]) + np.einsum("bij,bj->bi",
+                                                            np.stack([s.FtG for s in samples]), qr)
+    g[:, m:] = -qr / gam[:, None]
+    tol = 1e-13 * np.maximum(1.0, np.abs(g).max(axis=1))
+    free = np.stack([s.free for s in samples])
+    best = np.full(B, nv + 1)
+    backup = np.full(B, 3)
+    eye = np.eye(nv)
+    y = np.zeros((B, nv))
+    todo = np.arange(B)
+    for _ in range(_MAX_PIVOTS):
+        f = free[todo]
+        Ht = H[todo]
+        M = Ht * (f[:, :, None] & f[:, None, :]) + eye * ~f[:, None, :]
+        yt = np.linalg.solve(M, (-g[todo] * f)[:, :, None])[:, :, 0]
+        yt[~f] = 0.0
+        grad = np.einsum("bij,bj->bi", Ht, yt) + g[todo]
+        tl = tol[todo, None]
+        bad = np.where(f, yt < -tl, grad < -tl)
+        y[todo] = yt
+        nbad = bad.sum(axis=1)
+        keep = nbad > 0
+        if not keep.any():
+            todo = todo[:0]
+            break
+        todo, bad, nbad = todo[keep], bad[keep], nbad[keep]
+        improve = nbad < best[todo]
+        use_backup = ~improve & (backup[todo] > 0)
+        murty = ~improve & ~use_backup
+        best[todo[improve]] = nbad[improve]
+        backup[todo[improve]] = 3
+        backup[todo[use_backup]] -= 1
+        flip = bad.copy()
+        if murty.any():
+            last = nv - 1 - np.argmax(bad[murty][:, ::-1], axis=1)
+            flip[murty] = False
+            flip[np.flatnonzero(murty), last] = True
+        free[todo] ^= flip
+    if todo.size:
+        raise RuntimeError("violation-loss QP: block pivoting did not terminate "
+                           f"in {_MAX_PIVOTS} rounds")
+    lam = np.maximum(y[:, :m], 0.0)
+    w0 = qr + np.einsum("bij,bj->bi", F, lam)
+    eta = np.maximum(w0 - gam[:, None] * lam, 0.0)
+    yp = np.concatenate((lam, eta), axis=1)
+    kkt = np.abs(np.minimum(yp, np.einsum("bij,bj->bi", H, yp) + g)).max(axis=1)
+    w = np.minimum(w0, gam[:, None] * lam)
+    e = np.einsum("bij,bj->bi", np.stack([s.D for s in samples]), lam) + np.stack(
+        [s.z for s in samples])
+    Qe = np.einsum("bij,bj->bi", np.stack([s.Qd for s in samples]), e)
+    loss = 0.5 * np.einsum("bi,bi->b", e, Qe) + (
+        np.einsum("bi,bi->b", lam, eta) + np.einsum("bi,bi->b", w, w) / (2 * gam)) / eps
+    grad = w / (eps * gam)[:, None]
+    for i, s in enumerate(samples):
+        s.free = free[i]
+    for i in np.flatnonzero(kkt > KKT_TOL):
+        sol = solve_sample(samples[i], r)
+        lam[i], eta[i], loss[i], grad[i], kkt[i] = (sol.lam, sol.eta, sol.loss, sol.grad,
+                                                    sol.kkt)
+    return lam, eta, loss, grad, kkt
+
+
 def batch_loss_and_grad(samples: Sequence[PreparedSample], r) -> tuple[float, np.ndarray, int]:
     """Mean loss and mean gradient over the samples; returns (loss, grad, n_used).
 
@@ -336,19 +450,15 @@ def batch_loss_and_grad(samples: Sequence[PreparedSample], r) -> tuple[float, np
     usable sample the loss is NaN and the gradient zero.
     """
     r = np.asarray(r, float)
-    total = 0.0
-    grad = np.zeros(r.shape[0])
-    used = 0
-    for s in samples:
-        sol = solve_sample(s, r)
-        if not (np.isfinite(sol.loss) and np.all(np.isfinite(sol.grad))):
-            continue
-        total += sol.loss
-        grad += sol.grad
-        used += 1
+    samples = list(samples)
+    if not samples:
+        return float("nan"), np.zeros(r.shape[0]), 0
+    _, _, loss, grad, _ = solve_batch(samples, r)
+    ok = np.isfinite(loss) & np.isfinite(grad).all(axis=1)
+    used = int(ok.sum())
     if used == 0:
-        return float("nan"), grad, 0
-    return total / used, grad / used, used
+        return float("nan"), np.zeros(r.shape[0]), 0
+    return float(loss[ok].mean()), grad[ok].mean(axis=0), used
 
 
 # --------------------------------------------------------------------------- Adam

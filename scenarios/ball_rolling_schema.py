@@ -1,0 +1,129 @@
+"""Schema of the ball-rolling scenarios (Franka Panda rolls a ball, or a fruit, along a circle).
+
+Registered with the scenario loader under `task: ball_rolling`.
+"""
+import dataclasses as dc
+import math
+from typing import List
+
+from adaptive_c3.scenarios.schema import (C3Config, LearnerConfig, ScenarioError,
+                                          _validate_common, register_task)
+
+
+@dc.dataclass
+class RollingModel:
+    """The controller's prior (a sphere) and how the true object differs from it."""
+    object: str = "ball"             # ball | orange | lime (the true object)
+    ball_radius: float = 0.0315      # the controller's model radius, m
+    radius_error: float = 0.005      # model radius - true radius, m (paper: 5 mm)
+    ball_mass: float = 0.132         # kg
+    ee_radius: float = 0.0195        # end-effector tip sphere, m
+    ee_mass: float = 0.01            # kg, the controller model's EE
+    friction: float = 1.0            # mu of the model's contacts
+    friction_edges: int = 4          # n_e per contact
+    eps_c: float = 0.01              # Anitescu regulariser
+    planning_dt: float = 0.1         # LCS step, s
+
+
+@dc.dataclass
+class TargetPath:
+    """The ball's target: a point on a circle that leads the ball by lead_deg."""
+    center: List[float] = dc.field(default_factory=lambda: [0.55, 0.0])  # m, robot base frame
+    radius: float = 0.1              # m
+    lead_deg: float = 20.0           # deg ahead of the ball along the circle
+
+
+@dc.dataclass
+class Gait:
+    """Roll phase (C3 plans with contact) then return phase (lift, move behind, lower)."""
+    roll_s: float = 1.0
+    return_s: float = 0.5
+    back_distance: float = 0.012     # extra gap behind the model ball surface, m
+    lift_height: float = 0.095       # EE centre height while travelling back, m above the table
+    contact_height_ratio: float = 0.6  # EE centre height when re-placed, as a fraction of 2 R_model
+    max_ee_speed: float = 1.0        # clamp on the desired EE speed, m/s
+    settle_s: float = 0.5            # initial move to the start pose before rolling
+
+
+@dc.dataclass
+class ImpedanceGains:
+    translational_stiffness: float = 500.0
+    translational_damping: float = 45.0
+    rotational_stiffness: float = 900.0
+    rotational_damping: float = 20.0
+    nullspace_stiffness: float = 4.0
+    nullspace_damping: float = 4.0
+    ee_tilt_deg: float = 15.0
+    q_null: List[float] = dc.field(default_factory=lambda: [0.0, 0.361, 0.0, -2.223, 0.0, 2.584, 0.0])
+    feedforward: bool = True         # add the planned contact force
+
+
+@dc.dataclass
+class CameraConfig:
+    enabled: bool = True             # False: the estimator reads the true ball pose plus noise
+    rate_hz: float = 80.0
+    width: int = 320
+    height: int = 240
+    position_noise_m: float = 0.0    # extra noise on the estimate (camera off only)
+    filter_alpha: float = 0.5        # low-pass weight of the newest measurement
+
+
+@dc.dataclass
+class BallRollingScenario:
+    task: str = "ball_rolling"
+    name: str = "ball_rolling"
+    robot: str = "panda"             # panda | point_ee (the controller's own EE model as the truth)
+    model: RollingModel = dc.field(default_factory=RollingModel)
+    c3: C3Config = dc.field(default_factory=lambda: C3Config(horizon=5, rate_hz=80.0, rho_scale=2.0))
+    learner: LearnerConfig = dc.field(default_factory=lambda: LearnerConfig(
+        enabled=True, learning_rate=5e-3, epsilon=2e-5, gamma=1e-2, rate_hz=20.0))
+    target: TargetPath = dc.field(default_factory=TargetPath)
+    gait: Gait = dc.field(default_factory=Gait)
+    impedance: ImpedanceGains = dc.field(default_factory=ImpedanceGains)
+    camera: CameraConfig = dc.field(default_factory=CameraConfig)
+    ball_start_angle_deg: float = 0.0   # where on the circle the ball starts (0 = +y of centre)
+    sim_time_step: float = 0.001        # true plant step, s
+    sim_duration_s: float = 60.0
+    initial_state: List[float] = dc.field(default_factory=list)   # unused (start from the gait)
+    seed: int = 0
+
+
+def validate_ball_rolling(s: BallRollingScenario) -> None:
+    _validate_common(s)
+
+    def need(cond, msg):
+        if not cond:
+            raise ScenarioError(msg)
+
+    def positive(path, value):
+        need(math.isfinite(value) and value > 0, f"{path} must be > 0, got {value}")
+
+    m = s.model
+    need(m.object in ("ball", "orange", "lime"), f"model.object must be ball, orange or lime, got '{m.object}'")
+    need(s.robot in ("panda", "point_ee"), f"robot must be panda or point_ee, got '{s.robot}'")
+    for key in ("ball_radius", "ball_mass", "ee_radius", "ee_mass", "friction", "eps_c", "planning_dt"):
+        positive(f"model.{key}", getattr(m, key))
+    need(math.isfinite(m.radius_error) and abs(m.radius_error) < 0.5 * m.ball_radius,
+         f"model.radius_error must be smaller than half the radius, got {m.radius_error}")
+    need(m.friction_edges in (4, 8), f"model.friction_edges must be 4 or 8, got {m.friction_edges}")
+    need(len(s.target.center) == 2 and all(math.isfinite(v) for v in s.target.center),
+         "target.center must be [x, y]")
+    positive("target.radius", s.target.radius)
+    g = s.gait
+    for key in ("roll_s", "return_s", "lift_height", "max_ee_speed"):
+        positive(f"gait.{key}", getattr(g, key))
+    need(0 < g.contact_height_ratio < 1, "gait.contact_height_ratio must be in (0, 1)")
+    imp = s.impedance
+    for key in ("translational_stiffness", "translational_damping", "rotational_stiffness",
+                "rotational_damping"):
+        positive(f"impedance.{key}", getattr(imp, key))
+    need(len(imp.q_null) == 7, "impedance.q_null must have 7 joint angles")
+    positive("camera.rate_hz", s.camera.rate_hz)
+    need(16 <= s.camera.width <= 4096 and 16 <= s.camera.height <= 4096, "camera size out of range")
+    need(0 < s.camera.filter_alpha <= 1, "camera.filter_alpha must be in (0, 1]")
+    positive("sim_time_step", s.sim_time_step)
+    if len(s.c3.q_diag) not in (0, 19):
+        raise ScenarioError(f"c3.q_diag must have 19 entries for ball rolling, got {len(s.c3.q_diag)}")
+
+
+register_task("ball_rolling", BallRollingScenario, validate_ball_rolling)
