@@ -69,3 +69,45 @@ def tip_pose(q, tip_offset: float = EE_TIP_OFFSET) -> np.ndarray:
     X = flange_pose(q).copy()
     X[:3, 3] = X[:3, 3] + X[:3, 2] * tip_offset
     return X
+
+
+def tip_jacobian(q, tip_offset: float = EE_TIP_OFFSET) -> np.ndarray:
+    """6 x 7 geometric Jacobian of the tip in the base frame, rows [angular; linear]."""
+    Xs = link_transforms(q)
+    p_tip = tip_pose(q, tip_offset)[:3, 3]
+    J = np.zeros((6, 7))
+    for i in range(7):
+        z, o = Xs[i][:3, 2], Xs[i][:3, 3]      # joint i+1 axis and origin
+        J[:3, i] = z
+        J[3:, i] = np.cross(z, p_tip - o)
+    return J
+
+
+def solve_ik(p_des, R_des, q_guess=Q_NULL, tip_offset: float = EE_TIP_OFFSET,
+             iters: int = 200, tol: float = 1e-10, damping: float = 1e-3):
+    """Joint angles putting the tip at p_des (m) with orientation R_des (3x3), or None.
+
+    Damped least squares from q_guess (the redundancy is resolved towards q_guess by
+    a null-space pull), clamped to the joint limits. Returns None if the pose error
+    does not fall below sqrt(tol) (position in m, orientation in rad).
+    """
+    q = np.asarray(q_guess, float).copy()
+    q0 = q.copy()
+    p_des = np.asarray(p_des, float)
+    R_des = np.asarray(R_des, float)
+    for _ in range(iters):
+        X = tip_pose(q, tip_offset)
+        dR = R_des @ X[:3, :3].T
+        w = 0.5 * np.array([dR[2, 1] - dR[1, 2], dR[0, 2] - dR[2, 0], dR[1, 0] - dR[0, 1]])
+        err = np.concatenate([w, p_des - X[:3, 3]])
+        if err @ err < tol:
+            return q
+        J = tip_jacobian(q, tip_offset)
+        JJt = J @ J.T + damping ** 2 * np.eye(6)
+        dq = J.T @ np.linalg.solve(JJt, err)
+        N = np.eye(7) - J.T @ np.linalg.solve(JJt, J)
+        q = np.clip(q + dq + 0.1 * N @ (q0 - q), Q_MIN, Q_MAX)
+    X = tip_pose(q, tip_offset)
+    ok = (np.linalg.norm(X[:3, 3] - p_des) < np.sqrt(tol)
+          and np.linalg.norm(R_des @ X[:3, :3].T - np.eye(3)) < np.sqrt(tol))
+    return q if ok else None

@@ -9,9 +9,11 @@ complementary basis and is meant as ground truth in tests.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.linalg.lapack import dgesv
 
 __all__ = ["LcpResult", "solve_lcp", "solve_lcp_enumeration"]
 
@@ -37,8 +39,11 @@ class LcpResult:
     residual: float
 
 
-def _check_inputs(M, q) -> tuple[np.ndarray, np.ndarray]:
-    """Return (M, q) as float arrays; ValueError naming the problem if invalid."""
+def _check_inputs(M, q, check_finite: bool = True) -> tuple[np.ndarray, np.ndarray]:
+    """Return (M, q) as float arrays; ValueError naming the problem if invalid.
+
+    check_finite=False skips the NaN/inf check (the caller then does it).
+    """
     M = np.asarray(M, dtype=float)
     q = np.asarray(q, dtype=float)
     if q.ndim == 2 and 1 in q.shape:
@@ -53,11 +58,16 @@ def _check_inputs(M, q) -> tuple[np.ndarray, np.ndarray]:
         )
     if M.shape[0] == 0:
         raise ValueError("LCP is empty (M is 0x0)")
+    if check_finite:
+        _check_finite(M, q)
+    return M, q
+
+
+def _check_finite(M: np.ndarray, q: np.ndarray) -> None:
     if not np.isfinite(M).all():
         raise ValueError("LCP matrix M contains NaN or infinity")
     if not np.isfinite(q).all():
         raise ValueError("LCP vector q contains NaN or infinity")
-    return M, q
 
 
 def _residual(z: np.ndarray, w: np.ndarray) -> float:
@@ -104,20 +114,19 @@ def _template(m: int) -> np.ndarray:
 
 
 def _solve_small(A: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Solve A x = b (A square, nonsingular); closed form for sizes 1 and 2."""
-    n = b.shape[0]
-    if n == 1:
+    """Solve A x = b for a small square A (LAPACK dgesv, low call overhead).
+
+    Raises np.linalg.LinAlgError if A is exactly singular.
+    """
+    if b.shape[0] == 1:
         a = float(A[0, 0])
         if a == 0.0:
             raise np.linalg.LinAlgError("singular 1x1 system")
         return b / a
-    if n == 2:
-        a, c, d, e = float(A[0, 0]), float(A[0, 1]), float(A[1, 0]), float(A[1, 1])
-        det = a * e - c * d
-        if abs(det) > 1e-12 * (abs(a * e) + abs(c * d)):
-            b0, b1 = float(b[0]), float(b[1])
-            return np.array([(e * b0 - c * b1) / det, (a * b1 - d * b0) / det])
-    return np.linalg.solve(A, b)
+    _, _, x, info = dgesv(A, b)
+    if info != 0:
+        raise np.linalg.LinAlgError(f"dgesv failed (info={info})")
+    return x
 
 
 def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10) -> LcpResult:
@@ -130,16 +139,18 @@ def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10) -> Lc
     iteration cap, or a final residual above tolerance. Raises ValueError for
     malformed input.
     """
-    M, q = _check_inputs(M, q)
+    M, q = _check_inputs(M, q, check_finite=False)
     m = q.shape[0]
     qlist = q.tolist()
+    mnorm = float(np.abs(M).max())
+    if not (math.isfinite(mnorm) and math.isfinite(sum(qlist))):
+        _check_finite(M, q)  # raises unless only the sum overflowed
     qmin = min(qlist)
     if qmin >= 0.0:  # z = 0 is a solution
         return LcpResult(np.zeros(m), q.copy(), True, 0, "trivial solution (q >= 0)", 0.0)
 
     if max_iterations is None:
         max_iterations = 50 * (m + 1)
-    mnorm = float(np.abs(M).max())
     piv_tol = tol * max(1.0, mnorm)
     tie_tol = 1e-12
     z0_id = 2 * m
@@ -153,9 +164,8 @@ def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10) -> Lc
     basis = list(range(m))
 
     # First pivot: z0 enters; the row of the lexicographically smallest (q_i, e_i)
-    # leaves (ties in q_i go to the largest index), which makes the rhs >= 0.
-    thr = qmin + tie_tol * (1.0 + abs(qmin))
-    r = max(i for i in range(m) if qlist[i] <= thr)
+    # leaves (exact ties in q_i go to the largest index), which makes the rhs >= 0.
+    r = max(i for i in range(m) if qlist[i] == qmin)
     entering = z0_id
     piv = -1.0
 
@@ -179,13 +189,13 @@ def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10) -> Lc
         # Lexicographic minimum-ratio test on the entering column.
         col = T[:, entering + 1].tolist()
         rhs = T[:, 0].tolist()
-        ratios = [rhs[i] / col[i] if col[i] > piv_tol else _INF for i in range(m)]
+        ratios = [b / c if c > piv_tol else _INF for b, c in zip(rhs, col)]
         rmin = min(ratios)
         if rmin == _INF:
             message = "ray termination (no solution found by Lemke)"
             break
         thr = rmin + tie_tol * (1.0 + abs(rmin))
-        ties = [i for i in range(m) if ratios[i] <= thr]
+        ties = [i for i, t in enumerate(ratios) if t <= thr]
         if len(ties) == 1:
             r = ties[0]
         else:
@@ -203,6 +213,8 @@ def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10) -> Lc
     if terminated and zidx:
         try:
             za = _solve_small(M.take(zidx, 0).take(zidx, 1), np.negative(q.take(zidx)))
+            if not math.isfinite(sum(za.tolist())):
+                raise np.linalg.LinAlgError("non-finite solution of the basis system")
             z = np.zeros(m)
             z[zidx] = za
             np.maximum(z, 0.0, out=z)
@@ -241,8 +253,11 @@ def _tableau_z(T: np.ndarray, m: int, zrows: list, zidx: list) -> np.ndarray:
 
 
 def _residual_nonneg_z(z: np.ndarray, w: np.ndarray) -> float:
-    """Residual max(|z_i w_i|, -w_i, 0) for a z already known to be >= 0."""
-    return max(0.0, max(max(abs(a * b), -b) for a, b in zip(z.tolist(), w.tolist())))
+    """Residual max(|z_i w_i|, -w_i, 0) for a z already known to be >= 0 (inf if NaN)."""
+    vals = [max(abs(a * b), -b) for a, b in zip(z.tolist(), w.tolist())]
+    if any(map(math.isnan, vals)):
+        return _INF
+    return max(0.0, max(vals))
 
 
 def solve_lcp_enumeration(M, q, tol: float = 1e-9) -> LcpResult:

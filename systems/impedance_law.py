@@ -1,0 +1,168 @@
+"""Cartesian impedance law with null-space posture control (pure numpy core).
+
+The law (all vectors in the world frame W, SI units):
+
+    wrench F = [ K_r e_R - D_r w ;  K_t (p_d - p) + D_t (v_d - v) + f_ff ]
+    tau      = J' F + N' (K_n (q_null - q) - D_n qdot) + C(q, qdot) qdot
+    tau      = clip(tau, -tau_max, tau_max)
+
+J (6 x 7) is the EE tip's spatial-velocity Jacobian with rows [angular; translational]
+(Drake's order), w and v the tip's angular and translational velocity, e_R the rotation
+vector of R_d R' (the rotation that takes the current EE orientation R to the desired
+R_d). Like Franka's cartesian impedance example the task term is a plain J' F (no
+operational-space inertia); the null-space projector is the dynamically consistent one,
+N' = I - J' Lambda J M^-1 with Lambda = (J M^-1 J')^-1, so the posture term does not
+disturb the EE. C(q, qdot) qdot (Coriolis/centripetal) is compensated; gravity is NOT:
+the torque command means "without gravity", as a real Franka in torque mode expects.
+
+Option `operational_space=True` replaces the feedback part of F by Lambda F_fb
+(Lambda = task-space inertia; f_ff is still added unweighted): the gains then mean
+per-unit-mass stiffness (1/s^2) and damping (1/s), and 500/45 gives a critically damped
+EE in every direction. With the plain law (the reference's, the default) the Panda's
+large reflected motor inertia makes the EE's apparent mass about 16 kg along x near
+q_null, so K = 500 N/m, D = 45 N s/m is under-damped there (damping ratio ~0.25).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from adaptive_c3.models.panda_kinematics import Q_NULL, TAU_MAX  # rad, N m
+
+
+@dataclass(frozen=True)
+class ImpedanceGains:
+    """Reference gains (DESIGN.md section 4)."""
+    translational_stiffness: float = 500.0   # N/m
+    translational_damping: float = 45.0      # N s/m
+    rotational_stiffness: float = 900.0      # N m/rad
+    rotational_damping: float = 20.0         # N m s/rad
+    nullspace_stiffness: float = 4.0         # N m/rad
+    nullspace_damping: float = 4.0           # N m s/rad
+    torque_limits: np.ndarray = field(default_factory=lambda: TAU_MAX.copy())  # N m
+    operational_space: bool = False          # True: feedback wrench weighted by Lambda
+
+
+def axis_angle_matrix(axis, angle: float) -> np.ndarray:
+    """Rotation matrix of `angle` (rad) about the unit vector along `axis`."""
+    k = np.asarray(axis, float)
+    k = k / np.linalg.norm(k)
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * K @ K
+
+
+EE_DOWN = np.diag([1.0, -1.0, -1.0])   # flange z down, x along W x (as at q_null)
+
+
+def tilted_ee_rotation(tilt_deg: float = 15.0, lean_direction_xy=(-1.0, 0.0)) -> np.ndarray:
+    """EE orientation R_WE with the tool axis leaning tilt_deg from vertical.
+
+    The tool axis (flange +z, from the flange to the tip) becomes
+    (sin t * d, -cos t) for the horizontal unit direction d = lean_direction_xy: the
+    tip leans towards d, the flange away from it. tilt_deg = 0 gives EE_DOWN, the
+    orientation the flange has at q_null. The reference experiment tilts the EE by 15
+    degrees, away from the ball's desired direction of motion (so it changes with the
+    plan; see the optional "ee.desired_orientation" input of ImpedanceController). The
+    fixed default leans the tip towards the robot base (-x): at the circle about
+    (0.55, 0) this keeps the wrist away from its limits and tracks about twice as well
+    as leaning outwards.
+    """
+    d = np.array([lean_direction_xy[0], lean_direction_xy[1], 0.0], float)
+    d = d / np.linalg.norm(d)
+    axis = np.cross(d, [0.0, 0.0, 1.0])
+    return axis_angle_matrix(axis, np.radians(tilt_deg)) @ EE_DOWN
+
+
+def quaternion_to_rotation(q_wxyz) -> np.ndarray:
+    """Rotation matrix of a (not necessarily normalised) quaternion [w, x, y, z]."""
+    w, x, y, z = np.asarray(q_wxyz, float) / np.linalg.norm(q_wxyz)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])
+
+
+def rotation_vector(R: np.ndarray) -> np.ndarray:
+    """Rotation vector (axis * angle, angle in [0, pi]) of a rotation matrix."""
+    cos_a = np.clip((np.trace(R) - 1.0) / 2.0, -1.0, 1.0)
+    angle = np.arccos(cos_a)
+    w = np.array([R[2, 1] - R[1, 2], R[0, 2] - R[2, 0], R[1, 0] - R[0, 1]])
+    if angle < 1e-6:
+        return 0.5 * w                      # first order: R ~ I + [w]x
+    if np.pi - angle < 1e-4:
+        # Near pi: axis from the diagonal of (R + I) / 2 = a a'.
+        B = (R + np.eye(3)) / 2.0
+        i = int(np.argmax(np.diag(B)))
+        axis = B[:, i] / np.sqrt(max(B[i, i], 1e-12))
+        axis = axis / np.linalg.norm(axis)
+        if axis @ w < 0:
+            axis = -axis
+        return angle * axis
+    return angle / (2.0 * np.sin(angle)) * w
+
+
+def orientation_error(R_des: np.ndarray, R: np.ndarray) -> np.ndarray:
+    """Rotation vector e_R (world frame) of R_des R': rotating R by e_R gives R_des."""
+    return rotation_vector(R_des @ R.T)
+
+
+def task_inertia(J: np.ndarray, M: np.ndarray, reg: float = 1e-8):
+    """(Lambda, M^-1 J'): task-space inertia (J M^-1 J')^-1 (slightly regularised)."""
+    Minv_Jt = np.linalg.solve(M, J.T)
+    JMJ = J @ Minv_Jt
+    return np.linalg.inv(JMJ + reg * np.eye(JMJ.shape[0])), Minv_Jt
+
+
+def nullspace_projector_transpose(J: np.ndarray, M: np.ndarray,
+                                  reg: float = 1e-8) -> np.ndarray:
+    """Dynamically consistent N' = I - J' Lambda J M^-1 (7 x 7)."""
+    Lam, Minv_Jt = task_inertia(J, M, reg)
+    # J M^-1 = (M^-1 J')' since M is symmetric.
+    return np.eye(M.shape[0]) - J.T @ Lam @ Minv_Jt.T
+
+
+def impedance_torque(*, J, M, p, R, q, v, p_des, v_des, R_des, f_ff=None,
+                     q_null=Q_NULL, gains: ImpedanceGains = ImpedanceGains(),
+                     coriolis=None) -> np.ndarray:
+    """Joint torque command (7, N m, without gravity) of the impedance law above.
+
+    J: 6x7 tip Jacobian [angular; translational] in W; M: 7x7 mass matrix; p (m), R:
+    tip position and orientation in W; q (rad), v (rad/s): joint state; p_des (m),
+    v_des (m/s): desired tip position/velocity in W; R_des: desired orientation;
+    f_ff (N, W): feed-forward force added at the tip; coriolis: C(q, v) v (N m) or None.
+    Returns zeros if any input is non-finite.
+    """
+    J = np.asarray(J, float)
+    M = np.asarray(M, float)
+    q = np.asarray(q, float)
+    v = np.asarray(v, float)
+    f_ff = np.zeros(3) if f_ff is None else np.asarray(f_ff, float)
+    cor = np.zeros(len(q)) if coriolis is None else np.asarray(coriolis, float)
+    arrays = (J, M, np.asarray(p, float), np.asarray(R, float), q, v,
+              np.asarray(p_des, float), np.asarray(v_des, float),
+              np.asarray(R_des, float), f_ff, cor, np.asarray(q_null, float))
+    if not all(np.all(np.isfinite(a)) for a in arrays):
+        return np.zeros(len(q))
+    g = gains
+    V = J @ v                                  # [w; v_tip]
+    w, v_tip = V[:3], V[3:]
+    e_R = orientation_error(np.asarray(R_des, float), np.asarray(R, float))
+    torque = g.rotational_stiffness * e_R - g.rotational_damping * w
+    force = (g.translational_stiffness * (np.asarray(p_des, float) - np.asarray(p, float))
+             + g.translational_damping * (np.asarray(v_des, float) - v_tip))
+    Lam, Minv_Jt = task_inertia(J, M)
+    wrench = np.concatenate([torque, force])
+    if g.operational_space:
+        wrench = Lam @ wrench
+    wrench[3:] += f_ff
+    tau_task = J.T @ wrench
+    tau_posture = (g.nullspace_stiffness * (np.asarray(q_null, float) - q)
+                   - g.nullspace_damping * v)
+    Nt = np.eye(len(q)) - J.T @ Lam @ Minv_Jt.T
+    tau = tau_task + Nt @ tau_posture + cor
+    if not np.all(np.isfinite(tau)):
+        return np.zeros(len(q))
+    lim = np.asarray(g.torque_limits, float)
+    return np.clip(tau, -lim, lim)
