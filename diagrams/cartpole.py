@@ -58,7 +58,7 @@ def cartpole_c3_options(s: CartpoleScenario):
         qp_backend=c.qp_backend, rho_scale=c.rho_scale, warm_start=c.warm_start,
         q_diag=c.q_diag or CARTPOLE_Q, r_diag=c.r_diag or CARTPOLE_R,
         g_diag=c.g_diag or [0.1] * 6 + [0.0],
-        u_diag=c.u_diag or [1.0] * 7))
+        u_diag=c.u_diag or [1000.0] * 4 + [1.0] * 2 + [0.0]))  # reference cart-pole U
 
 
 def learner_options(cfg, num_lambda: int):

@@ -138,3 +138,13 @@ if __name__ == "__main__":
         sel = d["region"] == k
         print(f"{name:22s} cells {sel.sum():5d}  zero-gradient cells "
               f"{np.count_nonzero(d['grad_norm'][sel] == 0):5d}")
+
+
+def cmd_gradient_map(args) -> int:
+    """`adaptive-c3 gradient-map --out DIR`: write the paper's Fig. 3 for the cart-pole."""
+    from pathlib import Path
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    make_gradient_map(out / "gradient_map.png")
+    print(f"wrote {out / 'gradient_map.png'}")
+    return 0
