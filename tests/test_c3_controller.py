@@ -3,38 +3,22 @@ import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
 from pydrake.systems.analysis import Simulator
-from pydrake.systems.framework import BasicVector, DiagramBuilder, LeafSystem
-from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import (ConstantValueSource, ConstantVectorSource,
+                                        LogVectorOutput)
 
 from adaptive_c3.models.cartpole import cartpole_lcs
 from adaptive_c3.systems.c3 import C3Solution, cartpole_c3_options
 from adaptive_c3.systems.c3_controller import C3Controller
 from adaptive_c3.systems.lcs import LcsSequence
-
-
-class _TestLcsPlant(LeafSystem):
-    """Test-only stand-in: x+ = LCS step of (x, u) every lcs.dt; records max force."""
-
-    def __init__(self, lcs, x0):
-        super().__init__()
-        self._lcs = lcs
-        self._x = self.DeclareDiscreteState(BasicVector(np.asarray(x0, float)))
-        self.DeclareVectorInputPort("u", lcs.num_inputs)
-        self.DeclareStateOutputPort("x", self._x)
-        self.DeclarePeriodicDiscreteUpdateEvent(lcs.dt, 0.0, self._step)
-        self.max_force = 0.0
-
-    def _step(self, context, discrete_state):
-        x = context.get_discrete_state(self._x).get_value()
-        x_next, lam = self._lcs.step(x, self.get_input_port(0).Eval(context))
-        self.max_force = max(self.max_force, float(lam.max()))
-        discrete_state.get_mutable_vector(self._x).SetFromVector(x_next)
+from adaptive_c3.systems.lcs_plant import LcsPlant
 
 
 def _diagram(x0, lcs_value, rate_hz=80.0, target=None):
     lcs = cartpole_lcs()
     b = DiagramBuilder()
-    plant = b.AddSystem(_TestLcsPlant(lcs, x0))
+    plant = b.AddSystem(LcsPlant(lcs, x0))
+    plant.force_log = LogVectorOutput(plant.GetOutputPort("contact_force"), b, lcs.dt)
     ctrl = b.AddSystem(C3Controller(cartpole_c3_options(), 4, 1, 2, rate_hz=rate_hz))
     src = b.AddSystem(ConstantValueSource(AbstractValue.Make(lcs_value)))
     b.Connect(plant.get_output_port(0), ctrl.GetInputPort("state"))
@@ -54,7 +38,8 @@ def test_controller_stabilises_cartpole_in_a_diagram(x0):
     ctx = sim.get_context()
     x = plant.get_output_port(0).Eval(plant.GetMyContextFromRoot(ctx))
     assert np.abs(x).max() < 0.05
-    assert plant.max_force > 0.0                 # it used the walls
+    forces = plant.force_log.FindLog(ctx).data()
+    assert forces.max() > 0.0                    # it used the walls
     stats = ctrl.solve_time_stats()
     assert stats["count"] == 8 * 80              # t = 0, 1/80, ..., 8 - 1/80 s
     assert 0 < stats["median_s"] <= stats["max_s"]

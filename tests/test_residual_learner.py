@@ -11,6 +11,7 @@ from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource
 
 from adaptive_c3.models.cartpole import CartpoleParams, cartpole_lcs
 from adaptive_c3.systems.lcs import Lcs
+from adaptive_c3.systems.lcs_plant import LcsPlant
 from adaptive_c3.systems.residual_learner import ResidualLearner
 from adaptive_c3.systems.violation_loss import LearnerOptions
 
@@ -18,23 +19,6 @@ DPHI = np.array([-0.15, 0.15])
 TRUE = cartpole_lcs()
 MODEL = cartpole_lcs(wall_offset_error=DPHI)
 OPTS = LearnerOptions(epsilon=100.0, gamma=1e-2, learning_rate=3e-3, batch_size=10)
-
-
-class _LcsPlant(LeafSystem):
-    """Test-only plant: x <- lcs.step(x, u) every lcs.dt (discrete state, output 'state')."""
-
-    def __init__(self, lcs, x0):
-        super().__init__()
-        self._lcs = lcs
-        self._x = self.DeclareDiscreteState(np.asarray(x0, float))
-        self.DeclareVectorInputPort("u", lcs.num_inputs)
-        self.DeclareStateOutputPort("state", self._x)
-        self.DeclarePeriodicDiscreteUpdateEvent(lcs.dt, 0.0, self._step)
-
-    def _step(self, context, discrete_state):
-        x = context.get_discrete_state(self._x).get_value()
-        u = self.get_input_port(0).Eval(context)
-        discrete_state.get_mutable_vector(self._x).SetFromVector(self._lcs.step(x, u)[0])
 
 
 class _Shaker(LeafSystem):
@@ -56,7 +40,7 @@ class _Shaker(LeafSystem):
 
 def build(enable=None, enabled_param=True, opts=OPTS, model=MODEL, rate_hz=100.0, **kw):
     b = DiagramBuilder()
-    plant = b.AddSystem(_LcsPlant(TRUE, np.zeros(4)))
+    plant = b.AddSystem(LcsPlant(TRUE, np.zeros(4)))
     shaker = b.AddSystem(_Shaker(TRUE))
     learner = b.AddSystem(ResidualLearner(opts, 4, 1, 2, rate_hz=rate_hz,
                                           enabled=enabled_param, **kw))
