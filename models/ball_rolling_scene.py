@@ -18,7 +18,7 @@ from pydrake.geometry import Box, Sphere
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
-from pydrake.multibody.tree import ModelInstanceIndex, SpatialInertia
+from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, SpatialInertia
 
 PANDA_URDF = Path(__file__).with_name("panda.urdf")
 EE_TIP_FRAME = "panda_ee_tip"   # sphere centre of the end-effector tool
@@ -109,6 +109,29 @@ def add_ball_rolling_scene(plant: MultibodyPlant, *, ball_radius: float = BALL_R
     plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(
         [ball_position[0], ball_position[1], table_top_z + ball_radius]))
     return BallRollingScene(panda, ball, ball_radius, table_top_z)
+
+
+def add_point_ee(plant: MultibodyPlant, *, radius: float = 0.0195, mass: float = 1.0,
+                 position=(0.55, 0.0, 0.1), mu: float = 1.0,
+                 name: str = "point_ee") -> ModelInstanceIndex:
+    """A sphere on three world prismatic joints (x, y, z) with force actuators - the
+    controller model's EE with a realistic mass, for robot: point_ee. The instance's
+    state is [x, y, z, vx, vy, vz]; its actuation [fx, fy, fz] (N, world)."""
+    instance = plant.AddModelInstance(name)
+    link_x = plant.AddRigidBody(f"{name}_x_link", instance, SpatialInertia.Zero())
+    link_y = plant.AddRigidBody(f"{name}_y_link", instance, SpatialInertia.Zero())
+    tip = plant.AddRigidBody(name, instance, SpatialInertia.SolidSphereWithMass(mass, radius))
+    frames = (plant.world_frame(), link_x.body_frame(), link_y.body_frame(), tip.body_frame())
+    for i, axis in enumerate(np.eye(3)):
+        joint = plant.AddJoint(PrismaticJoint(f"{name}_{'xyz'[i]}", frames[i], frames[i + 1],
+                                              axis))
+        joint.set_default_translation(float(position[i]))
+        plant.AddJointActuator(f"{name}_{'xyz'[i]}", joint)
+    plant.RegisterCollisionGeometry(tip, RigidTransform(), Sphere(radius),
+                                    f"{name}_collision", CoulombFriction(mu, mu))
+    plant.RegisterVisualGeometry(tip, RigidTransform(), Sphere(radius), f"{name}_visual",
+                                 np.array([0.3, 0.3, 0.35, 1.0]))
+    return instance
 
 
 def make_arm_plant(time_step: float = 0.0, gravity: bool = True) -> MultibodyPlant:

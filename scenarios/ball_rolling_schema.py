@@ -18,7 +18,8 @@ class RollingModel:
     radius_error: float = 0.005      # model radius - true radius, m (paper: 5 mm)
     ball_mass: float = 0.132         # kg
     ee_radius: float = 0.0195        # end-effector tip sphere, m
-    ee_mass: float = 0.01            # kg, the controller model's EE
+    ee_mass: float = 1.0             # kg, the controller model's EE (about the arm's
+                                     # apparent mass at the tip; the reference uses 0.01)
     friction: float = 1.0            # mu of the model's contacts
     friction_edges: int = 4          # n_e per contact
     eps_c: float = 0.01              # Anitescu regulariser
@@ -35,14 +36,20 @@ class TargetPath:
 
 @dc.dataclass
 class Gait:
-    """Roll phase (C3 plans with contact) then return phase (lift, move behind, lower)."""
+    """Roll phase (C3 plans with contact) then return phase (lift, move behind, lower).
+    Heights are m above the model's EE-on-top-of-ball height (2 R_model + r_ee), which
+    the learned EE-ball gap offset lowers (systems/rolling_gait.py)."""
     roll_s: float = 1.0
     return_s: float = 0.5
-    back_distance: float = 0.012     # extra gap behind the model ball surface, m
-    lift_height: float = 0.095       # EE centre height while travelling back, m above the table
-    contact_height_ratio: float = 0.6  # EE centre height when re-placed, as a fraction of 2 R_model
-    max_ee_speed: float = 1.0        # clamp on the desired EE speed, m/s
     settle_s: float = 0.5            # initial move to the start pose before rolling
+    back_distance: float = 0.02      # m behind the ball centre in the return phase
+    roll_height: float = -0.005      # roll-phase EE target
+    lift_height: float = 0.03        # lift and side-step height
+    place_height: float = -0.005     # where the EE is put down (negative: pressing)
+    max_ee_speed: float = 1.0        # clamp on the commanded EE speed, m/s
+    return_ee_weight: float = 1.0e4  # C3 weight on EE position in the return phase
+    min_height: float = -0.005       # floor of the commanded EE height
+    roll_lead: float = 1.0           # roll-phase EE target: 0 over the ball, 1 over its target
 
 
 @dc.dataclass
@@ -73,6 +80,7 @@ class BallRollingScenario:
     task: str = "ball_rolling"
     name: str = "ball_rolling"
     robot: str = "panda"             # panda | point_ee (the controller's own EE model as the truth)
+    point_ee_mass: float = 1.0       # kg, the point EE's mass when robot: point_ee
     model: RollingModel = dc.field(default_factory=RollingModel)
     c3: C3Config = dc.field(default_factory=lambda: C3Config(horizon=5, rate_hz=80.0, rho_scale=2.0))
     learner: LearnerConfig = dc.field(default_factory=lambda: LearnerConfig(
@@ -110,9 +118,13 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
          "target.center must be [x, y]")
     positive("target.radius", s.target.radius)
     g = s.gait
-    for key in ("roll_s", "return_s", "lift_height", "max_ee_speed"):
+    for key in ("roll_s", "return_s", "back_distance", "lift_height", "max_ee_speed",
+                "return_ee_weight"):
         positive(f"gait.{key}", getattr(g, key))
-    need(0 < g.contact_height_ratio < 1, "gait.contact_height_ratio must be in (0, 1)")
+    need(g.settle_s >= 0, "gait.settle_s must be >= 0")
+    for key in ("roll_height", "place_height"):
+        need(math.isfinite(getattr(g, key)) and abs(getattr(g, key)) < 0.2,
+             f"gait.{key} must be a height within 0.2 m, got {getattr(g, key)}")
     imp = s.impedance
     for key in ("translational_stiffness", "translational_damping", "rotational_stiffness",
                 "rotational_damping"):

@@ -1,0 +1,289 @@
+"""The ball-rolling diagram (paper Section VII-B), built from a BallRollingScenario.
+
+Recipe (world frame W = robot base frame, table top z = 0):
+  1. true plant      Panda (or a point EE) + table + ball of the TRUE radius, SAP, 1 ms
+  2. robot           impedance controller (1 kHz, the plant step) -> simulated torque
+                     driver with gravity compensation -> plant actuation
+  3. ball sensing    overhead RgbdSensor -> Hough BallDetector at 80 Hz, or (camera off)
+                     the true pose plus noise, filtered the same way
+  4. estimator       EE + ball estimates -> the controller model's 19-state
+  5. LCS             Anitescu LCS of the controller model (MODEL radius) at 80 Hz, with
+                     the planning dt and with the loop period
+  6. learner         residual r_comp on the LCS offsets (200 Hz samples, 0.1 s
+                     transitions, one Adam step per 10 samples = 20 Hz)
+  7. planner         C3 on the LCS with residual + the roll/return gait -> EE command
+  8. loggers, Meshcat (optional)
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
+from pydrake.systems.framework import DiagramBuilder
+from pydrake.systems.primitives import VectorLogSink
+
+from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NAMES,
+                                                              ball_rolling_linearizer,
+                                                              default_state)
+from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene, add_point_ee
+from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
+from adaptive_c3.systems.anitescu_lcs_system import AnitescuLcsSystem
+from adaptive_c3.systems.ball_pose_sensor import BallPoseSensor
+from adaptive_c3.systems.ball_rolling_estimator import BallRollingEstimator
+from adaptive_c3.systems.ball_rolling_planner import BallRollingPlanner
+from adaptive_c3.systems.c3 import C3Options
+from adaptive_c3.systems.residual_learner import ResidualLearner
+from adaptive_c3.systems.rolling_gait import CirclePath, GaitSettings, RollingGait
+from adaptive_c3.systems.violation_loss import LearnerOptions
+
+LEARNER_SAMPLE_HZ = 200.0
+LOG_PERIOD_S = 0.01
+
+
+@dataclass
+class BallRollingDiagram:
+    diagram: object
+    plant: object
+    scene_graph: object
+    planner: BallRollingPlanner
+    learner: ResidualLearner
+    lcs_system: AnitescuLcsSystem
+    logs: dict              # name -> VectorLogSink
+    true_radius: float
+    ball_start: np.ndarray  # (3) true start position
+    ee_start: np.ndarray    # (3)
+    lambda_names: list
+
+
+def true_radius(s: BallRollingScenario) -> float:
+    return s.model.ball_radius - s.model.radius_error
+
+
+def ball_start_xy(s: BallRollingScenario) -> np.ndarray:
+    """Start on the circle at ball_start_angle_deg (from +x about the centre, CCW)."""
+    a = math.radians(s.ball_start_angle_deg)
+    c, r = s.target.center, s.target.radius
+    return np.array([c[0] + r * math.cos(a), c[1] + r * math.sin(a)])
+
+
+def make_gait(s: BallRollingScenario) -> RollingGait:
+    g = s.gait
+    settings = GaitSettings(roll_s=g.roll_s, return_s=g.return_s, settle_s=g.settle_s,
+                            back_distance=g.back_distance, roll_height=g.roll_height,
+                            lift_height=g.lift_height, place_height=g.place_height,
+                            max_ee_speed=g.max_ee_speed, roll_lead=g.roll_lead,
+                            min_height=g.min_height)
+    path = CirclePath(tuple(s.target.center), s.target.radius, s.target.lead_deg)
+    return RollingGait(settings, path, ball_radius=s.model.ball_radius,
+                       ee_radius=s.model.ee_radius)
+
+
+# Reference weights (DESIGN.md section 4) on the 19-state.
+ROLL_Q = [500.0] * 3 + [0.0] * 4 + [5000.0, 5000.0, 1000.0] + [10.0] * 3 + [0.1] * 6
+
+
+def c3_options(s: BallRollingScenario, phase: str, num_lambda: int) -> C3Options:
+    c = s.c3
+    q = list(c.q_diag) or list(ROLL_Q)
+    if phase != "roll":   # return phase: the EE follows the gait, the ball is let be
+        w = s.gait.return_ee_weight
+        q = [w] * 3 + [0.0] * 4 + [5.0, 5.0, 1000.0] + [10.0] * 3 + [0.1] * 6
+    nz = len(STATE_NAMES) + num_lambda + 3
+    return C3Options.from_dict(dict(
+        horizon=c.horizon, admm_iter=c.admm_iter, projection=c.projection,
+        qp_backend=c.qp_backend, rho_scale=c.rho_scale, warm_start=c.warm_start,
+        q_diag=q, qn_diag=q, r_diag=c.r_diag or [0.01] * 3,
+        g_diag=c.g_diag or [0.001] * len(STATE_NAMES) + [1000.0] * num_lambda + [0.001] * 3,
+        u_diag=c.u_diag or [100.0] * len(STATE_NAMES) + [1.0] * (num_lambda + 3)))
+
+
+def learner_options(s: BallRollingScenario) -> LearnerOptions:
+    cfg = s.learner
+    qd = list(cfg.qd_diag)
+    if not qd:   # reference: 1e5 on the ball's translational velocity, 0 elsewhere
+        qd = [0.0] * len(STATE_NAMES)
+        for i in range(BALL_VEL.start, BALL_VEL.stop):
+            qd[i] = 1e5
+    return LearnerOptions(epsilon=cfg.epsilon, gamma=cfg.gamma,
+                          learning_rate=cfg.learning_rate, batch_size=cfg.batch_size,
+                          Qd=qd, max_step=cfg.max_step)
+
+
+def _add_robot(builder, plant, s, panda, ee_instance):
+    """Impedance control of the EE; returns the system whose "ee.state" is measured and
+    the (desired_state, feedforward) input ports."""
+    imp = s.impedance
+    if panda is not None:
+        from adaptive_c3.systems.impedance_controller import ImpedanceController
+        from adaptive_c3.systems.impedance_law import ImpedanceGains
+        from adaptive_c3.systems.panda_sim_driver import GravityCompensatedDriver
+        gains = ImpedanceGains(translational_stiffness=imp.translational_stiffness,
+                               translational_damping=imp.translational_damping,
+                               rotational_stiffness=imp.rotational_stiffness,
+                               rotational_damping=imp.rotational_damping,
+                               nullspace_stiffness=imp.nullspace_stiffness,
+                               nullspace_damping=imp.nullspace_damping)
+        ctrl = builder.AddSystem(ImpedanceController(gains, tilt_deg=imp.ee_tilt_deg,
+                                                     q_null=imp.q_null))
+        driver = builder.AddSystem(GravityCompensatedDriver())
+        state = plant.get_state_output_port(panda)
+        builder.Connect(state, ctrl.GetInputPort("panda.state"))
+        builder.Connect(state, driver.GetInputPort("panda.state"))
+        builder.Connect(ctrl.GetOutputPort("panda.torque_command"),
+                        driver.GetInputPort("panda.torque_command"))
+        builder.Connect(driver.GetOutputPort("panda.actuation"),
+                        plant.get_actuation_input_port(panda))
+        return ctrl
+    from adaptive_c3.systems.point_ee_impedance import PointEeImpedance
+    ctrl = builder.AddSystem(PointEeImpedance(
+        stiffness=imp.translational_stiffness, damping=imp.translational_damping,
+        mass=s.point_ee_mass))
+    builder.Connect(plant.get_state_output_port(ee_instance),
+                    ctrl.GetInputPort("point_ee.state"))
+    builder.Connect(ctrl.GetOutputPort("point_ee.actuation"),
+                    plant.get_actuation_input_port(ee_instance))
+    return ctrl
+
+
+def _add_ball_sensing(builder, plant, scene_graph, s, ball_instance, start_xy):
+    """Returns the system with "ball.position" / "ball.velocity" outputs."""
+    cam = s.camera
+    if cam.enabled:
+        from adaptive_c3.systems.ball_detector import BallDetector
+        from adaptive_c3.systems.camera import add_overhead_camera, overhead_camera_spec
+        spec = overhead_camera_spec(target=(s.target.center[0], s.target.center[1], 0.0),
+                                    width=cam.width, height=cam.height)
+        sensor, spec = add_overhead_camera(builder, scene_graph, spec)
+        # The detector back-projects onto the plane z = R_MODEL: it only knows the model.
+        det = builder.AddSystem(BallDetector(spec, ball_radius=s.model.ball_radius,
+                                             period=1.0 / cam.rate_hz,
+                                             initial_position_xy=tuple(start_xy)))
+        builder.Connect(sensor.color_image_output_port(),
+                        det.GetInputPort("camera.color_image"))
+        return det
+    sens = builder.AddSystem(BallPoseSensor(
+        period=1.0 / cam.rate_hz, noise_m=cam.position_noise_m, alpha=cam.filter_alpha,
+        seed=s.seed, initial_position=(start_xy[0], start_xy[1], s.model.ball_radius)))
+    builder.Connect(plant.get_state_output_port(ball_instance),
+                    sens.GetInputPort("ball.true_state"))
+    return sens
+
+
+def _log(builder, port, name, logs):
+    sink = builder.AddSystem(VectorLogSink(port.size(), LOG_PERIOD_S))
+    sink.set_name(f"log_{name}")
+    builder.Connect(port, sink.get_input_port())
+    logs[name] = sink
+
+
+def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRollingDiagram:
+    m = s.model
+    R_true = true_radius(s)
+    builder = DiagramBuilder()
+
+    # 1. true plant
+    config = MultibodyPlantConfig(time_step=s.sim_time_step,
+                                  discrete_contact_approximation="sap")
+    plant, scene_graph = AddMultibodyPlant(config, builder)
+    start_xy = ball_start_xy(s)
+    scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=m.ball_mass,
+                                   ball_position=tuple(start_xy), mu=m.friction,
+                                   with_arm=(s.robot == "panda"))
+    gait = make_gait(s)
+    x_start = default_state(tuple(start_xy), ball_radius=m.ball_radius,
+                            ee_radius=m.ee_radius)
+    ee_start = gait.ee_target("settle", x_start)
+    ee_instance = None
+    if s.robot == "point_ee":
+        ee_instance = add_point_ee(plant, radius=m.ee_radius, mass=s.point_ee_mass,
+                                   position=ee_start, mu=m.friction)
+    plant.Finalize()
+    if scene.panda is not None:
+        _set_panda_start(plant, scene.panda, ee_start, s)
+
+    # 2-4. robot, ball sensing, estimator
+    robot = _add_robot(builder, plant, s, scene.panda, ee_instance)
+    ball_sensor = _add_ball_sensing(builder, plant, scene_graph, s, scene.ball, start_xy)
+    estimator = builder.AddSystem(BallRollingEstimator(m.ball_radius))
+    builder.Connect(robot.GetOutputPort("ee.state"), estimator.GetInputPort("ee.state"))
+    builder.Connect(ball_sensor.GetOutputPort("ball.position"),
+                    estimator.GetInputPort("ball.position"))
+    builder.Connect(ball_sensor.GetOutputPort("ball.velocity"),
+                    estimator.GetInputPort("ball.velocity"))
+    lcs_state = estimator.GetOutputPort("lcs_state")
+
+    # 5. LCS at the planning dt and at the loop period
+    x_start[0:3] = ee_start
+    lin_kwargs = dict(num_edges=m.friction_edges, eps_c=m.eps_c, ball_radius=m.ball_radius,
+                      ball_mass=m.ball_mass, ee_radius=m.ee_radius, ee_mass=m.ee_mass,
+                      mu=m.friction)
+    lin = ball_rolling_linearizer(dt=m.planning_dt, **lin_kwargs)
+    lin_loop = ball_rolling_linearizer(dt=1.0 / s.c3.rate_hz, **lin_kwargs)
+    lcs_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start))
+    loop_sys = builder.AddSystem(AnitescuLcsSystem(lin_loop, s.c3.rate_hz,
+                                                   initial_state=x_start))
+    num_lambda = len(lin.lambda_names())
+
+    # 6. learner
+    stride = max(1, int(round(LEARNER_SAMPLE_HZ / s.learner.rate_hz)))
+    learner = builder.AddSystem(ResidualLearner(
+        learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,
+        enabled=s.learner.enabled, transition_dt=m.planning_dt, transition_stride=stride))
+
+    # 7. planner
+    planner = builder.AddSystem(BallRollingPlanner(
+        gait, c3_options(s, "roll", num_lambda), c3_options(s, "return", num_lambda),
+        num_lambda=num_lambda, rate_hz=s.c3.rate_hz,
+        ee_ball_rows=tuple(range(num_lambda // 2)), planning_dt=m.planning_dt,
+        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * 9.81))
+
+    u_port = planner.GetOutputPort("lcs_input")
+    for sys_ in (lcs_sys, loop_sys):
+        builder.Connect(lcs_state, sys_.GetInputPort("state"))
+        builder.Connect(u_port, sys_.GetInputPort("input"))
+    builder.Connect(lcs_state, learner.GetInputPort("state"))
+    builder.Connect(u_port, learner.GetInputPort("input"))
+    builder.Connect(lcs_sys.GetOutputPort("lcs"), learner.GetInputPort("lcs"))
+    builder.Connect(lcs_state, planner.GetInputPort("state"))
+    builder.Connect(learner.GetOutputPort("lcs_with_residual"), planner.GetInputPort("lcs"))
+    builder.Connect(loop_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs_loop"))
+    builder.Connect(learner.GetOutputPort("r_comp"), planner.GetInputPort("r_comp"))
+    builder.Connect(planner.GetOutputPort("ee.desired_state"),
+                    robot.GetInputPort("ee.desired_state"))
+    builder.Connect(planner.GetOutputPort("ee.feedforward_force"),
+                    robot.GetInputPort("ee.feedforward_force"))
+
+    # 8. loggers, visualisation
+    logs = {}
+    _log(builder, plant.get_state_output_port(scene.ball), "ball_true", logs)
+    _log(builder, robot.GetOutputPort("ee.state"), "ee", logs)
+    _log(builder, lcs_state, "lcs_state", logs)
+    for name in ("ee.desired_state", "lcs_input", "phase", "ball_target"):
+        _log(builder, planner.GetOutputPort(name), name, logs)
+    _log(builder, learner.GetOutputPort("r_comp"), "r_comp", logs)
+    _log(builder, learner.GetOutputPort("loss"), "loss", logs)
+    if meshcat is not None:
+        from pydrake.geometry import MeshcatVisualizer
+        MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)
+
+    diagram = builder.Build()
+    diagram.set_name(f"ball_rolling[{s.name}]")
+    return BallRollingDiagram(diagram, plant, scene_graph, planner, learner, lcs_sys, logs,
+                              R_true, np.r_[start_xy, R_true], ee_start,
+                              list(lin.lambda_names()))
+
+
+def _set_panda_start(plant, panda, ee_start, s):
+    from adaptive_c3.models.panda_kinematics import solve_ik
+    from adaptive_c3.systems.impedance_law import tilted_ee_rotation
+    q = solve_ik(ee_start, tilted_ee_rotation(s.impedance.ee_tilt_deg),
+                 q_guess=np.asarray(s.impedance.q_null, float))
+    if q is None:
+        raise ValueError(f"the Panda cannot reach the start pose {np.round(ee_start, 3)}")
+    plant.SetDefaultPositions(panda, q)
+
+
+__all__ = ["BallRollingDiagram", "build_ball_rolling_diagram", "c3_options",
+           "learner_options", "make_gait", "true_radius", "ball_start_xy"]

@@ -1,0 +1,170 @@
+"""Run a ball-rolling scenario: simulate, then write summary.json, log.npz and figures.
+
+Figures (the paper's Figs. 5-6): `path.png` - the ball's path against the target circle
+(and the EE's); `residual.png` - the learned EE-ball gap offset and the loss over time,
+with the gait's contact events.
+"""
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+from pydrake.systems.analysis import Simulator
+
+from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
+from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
+from adaptive_c3.systems.rolling_gait import PHASES
+from adaptive_c3.tools.progress import Progress
+from adaptive_c3.tools.recording import Recording, save_recording
+
+CONTACT_TOL_M = 0.001   # true EE-ball distance counted as contact
+
+
+def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
+    """Simulate; returns (handles, logs dict name -> (t, data), wall seconds)."""
+    handles = build_ball_rolling_diagram(scenario, meshcat=meshcat)
+    simulator = Simulator(handles.diagram)
+    context = simulator.get_mutable_context()
+    simulator.Initialize()
+    T = scenario.sim_duration_s
+    bar = Progress(T, f"ball rolling [{scenario.name}]", enabled=None if progress else False)
+    start = time.perf_counter()
+    t, chunk = 0.0, max(T / 100, 0.05)
+    while t < T - 1e-12:
+        t = min(t + chunk, T)
+        simulator.AdvanceTo(t)
+        bar.update(t)
+    wall = time.perf_counter() - start
+    bar.close()
+    logs = {}
+    for name, sink in handles.logs.items():
+        log = sink.FindLog(context)
+        logs[name] = (log.sample_times().copy(), log.data().T.copy())
+    return handles, logs, wall
+
+
+def rolling_metrics(logs, scenario, true_radius: float) -> dict:
+    """laps, first contact, pushes before it and tracking error from the logs."""
+    t, ball = logs["ball_true"]
+    _, ee = logs["ee"]
+    _, phase = logs["phase"]
+    c = np.asarray(scenario.target.center, float)
+    xy = ball[:, 4:6]
+    angle = np.unwrap(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]))
+    progress = float(angle[-1] - angle[0])          # rad, counter-clockwise positive
+    gap = (np.linalg.norm(ee[:, :3] - ball[:, 4:7], axis=1) - true_radius
+           - scenario.model.ee_radius)
+    touching = gap <= CONTACT_TOL_M
+    first = int(np.argmax(touching)) if touching.any() else None
+    roll = phase[:, 0] == PHASES.index("roll")
+    roll_starts = np.flatnonzero(roll[1:] & ~roll[:-1]) + 1
+    if roll.size and roll[0]:
+        roll_starts = np.r_[0, roll_starts]
+    t_first = None if first is None else float(t[first])
+    pushes = (int(np.sum(t[roll_starts] <= t_first)) if t_first is not None
+              else int(len(roll_starts)))
+    radial = np.linalg.norm(xy - c, axis=1) - scenario.target.radius
+    since = slice(first or 0, None)
+    return {
+        "laps": int(max(progress, 0.0) // (2 * np.pi)),
+        "circle_progress": progress / (2 * np.pi),
+        "first_contact_s": t_first,
+        "pushes_before_contact": pushes,
+        "contact_fraction": float(np.mean(touching)),
+        "tracking_rmse_m": float(np.sqrt(np.mean(radial[since] ** 2))),
+        "ball_fell_off": bool(np.any(ball[:, 6] < -0.01)),
+    }
+
+
+def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = False) -> dict:
+    mc = None
+    if meshcat:
+        from pydrake.geometry import StartMeshcat
+        mc = StartMeshcat()
+        print(f"Meshcat: {mc.web_url()}", flush=True)
+    handles, logs, wall = simulate_ball_rolling(scenario, meshcat=mc)
+    t, x = logs["lcs_state"]
+    _, u = logs["lcs_input"]
+    _, r = logs["r_comp"]
+    _, loss = logs["loss"]
+    T = scenario.sim_duration_s
+    dt = scenario.model.planning_dt
+    half = len(handles.lambda_names) // 2
+    summary = {
+        "scenario": scenario.name,
+        "task": "ball_rolling",
+        "robot": scenario.robot,
+        "sim_duration_s": T,
+        "wall_s": wall,
+        "real_time_factor": T / wall if wall > 0 else None,
+        "final_state": x[-1].tolist(),
+        "state_names": list(STATE_NAMES),
+        "model_radius_m": scenario.model.ball_radius,
+        "true_radius_m": handles.true_radius,
+        "adaptation": bool(scenario.learner.enabled),
+        **rolling_metrics(logs, scenario, handles.true_radius),
+        "residual_final": r[-1].tolist(),
+        "residual_names": list(handles.lambda_names),
+        "ee_ball_gap_offset_m": float(np.mean(r[-1, :half]) * dt),
+        "loss_final": float(loss[-1, 0]),
+        "c3_solve_time": handles.planner.solve_time_stats(),
+        "planner_holds": handles.planner.failures,
+    }
+    _, ball = logs["ball_true"]
+    _, ee = logs["ee"]
+    _, phase = logs["phase"]
+    save_recording(out / "log.npz", Recording(
+        t=t, x=x, u=u, state_names=list(STATE_NAMES), input_names=list(INPUT_NAMES),
+        scenario=scenario_text,
+        extras={"r_comp": r, "loss": loss[:, 0], "ball_true": ball, "ee_true": ee,
+                "phase": phase[:, 0]}))
+    summary["plots"] = [p.name for p in plot_ball_rolling(out, logs, handles, scenario,
+                                                          summary)]
+    return summary
+
+
+def plot_ball_rolling(out: Path, logs, handles, scenario, summary) -> list[Path]:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    _, ball = logs["ball_true"]
+    _, ee = logs["ee"]
+    c, R = np.asarray(scenario.target.center), scenario.target.radius
+    fig, ax = plt.subplots(figsize=(5.5, 5.5))
+    a = np.linspace(0, 2 * np.pi, 200)
+    ax.plot(c[0] + R * np.cos(a), c[1] + R * np.sin(a), "k--", lw=1, label="target circle")
+    ax.plot(ee[:, 0], ee[:, 1], color="0.75", lw=0.6, label="EE tip")
+    ax.plot(ball[:, 4], ball[:, 5], color="tab:orange", lw=1.5, label="ball")
+    ax.plot(ball[0, 4], ball[0, 5], "o", color="tab:orange")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    on = "on" if scenario.learner.enabled else "off"
+    ax.set_title(f"{scenario.name}: adaptation {on}, {summary['laps']} laps")
+    ax.legend(loc="upper right", fontsize=7)
+    path_png = out / "path.png"
+    fig.savefig(path_png, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+
+    tr, r = logs["r_comp"]
+    tl, loss = logs["loss"]
+    half = r.shape[1] // 2
+    dt = scenario.model.planning_dt
+    fig, axes = plt.subplots(2, 1, figsize=(8, 5), sharex=True)
+    axes[0].plot(tr, 1e3 * dt * r[:, :half].mean(axis=1), label="EE-ball (learned)")
+    axes[0].plot(tr, 1e3 * dt * r[:, half:].mean(axis=1), label="ball-table (learned)")
+    axes[0].axhline(2e3 * scenario.model.radius_error, color="k", ls="--", lw=0.8,
+                    label="EE-ball on top: 2 x radius error")
+    if summary["first_contact_s"] is not None:
+        for ax in axes:
+            ax.axvline(summary["first_contact_s"], color="tab:green", lw=0.8)
+    axes[0].set_ylabel("gap offset r dt [mm]")
+    axes[0].legend(fontsize=7)
+    axes[1].semilogy(tl, np.maximum(loss[:, 0], 1e-12))
+    axes[1].set_ylabel("violation loss")
+    axes[1].set_xlabel("t [s]")
+    res_png = out / "residual.png"
+    fig.savefig(res_png, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return [path_png, res_png]
