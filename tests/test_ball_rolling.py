@@ -1,0 +1,130 @@
+"""Ball rolling: gait, estimator, sensor, planner guards and short closed-loop runs.
+
+The short runs use the point EE and the camera off (seconds each); the full experiment
+(Panda, camera, 60 s) is in the slow set.
+"""
+import json
+import math
+
+import numpy as np
+import pytest
+
+from adaptive_c3.models.ball_rolling_controller_model import (BALL_ANGVEL, BALL_POS,
+                                                              BALL_QUAT, default_state)
+from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+from adaptive_c3.systems.ball_rolling_estimator import lcs_state
+from adaptive_c3.systems.rolling_gait import (CirclePath, GaitSettings, RollingGait,
+                                              clamp_ee_command)
+
+SCENARIO = SCENARIO_DIR / "ball_rolling.yaml"
+FAST = ["robot=point_ee", "camera.enabled=false"]
+
+
+def _gait(**kw):
+    return RollingGait(GaitSettings(**kw), CirclePath(), ball_radius=0.0315,
+                       ee_radius=0.0195)
+
+
+def test_gait_phases_follow_the_clock():
+    g = _gait(roll_s=1.0, return_s=0.6, settle_s=0.5)
+    assert g.phase(0.2) == ("settle", -1)
+    assert g.phase(0.6) == ("roll", 0)
+    assert g.phase(1.6) == ("lift", 0)
+    assert g.phase(1.8) == ("side", 0)
+    assert g.phase(2.0) == ("place", 0)
+    assert g.phase(2.2) == ("roll", 1)
+
+
+def test_ball_target_leads_counter_clockwise_on_the_circle():
+    path = CirclePath((0.55, 0.0), 0.1, 20.0)
+    target = path.target_for([0.65, 0.0])
+    assert np.linalg.norm(target - [0.55, 0.0]) == pytest.approx(0.1)
+    assert math.degrees(path.angle_of(target)) == pytest.approx(20.0)
+
+
+def test_learned_gap_lowers_every_gait_height():
+    g = _gait()
+    x = default_state((0.65, 0.0))
+    for phase in ("roll", "lift", "side", "place"):
+        hi = g.ee_target(phase, x, gap=0.0)[2]
+        lo = g.ee_target(phase, x, gap=0.01)[2]
+        assert hi - lo == pytest.approx(0.01)
+    behind = g.ee_target("place", x)
+    assert behind[1] < x[BALL_POS][1]   # behind the ball: it rolls towards +y here
+
+
+def test_clamp_limits_the_commanded_speed():
+    p, v = clamp_ee_command([0, 0, 0], [0.1, 0, 0], [5.0, 0, 0], dt=0.01, max_speed=1.0)
+    assert np.linalg.norm(p) == pytest.approx(0.01)
+    assert np.linalg.norm(v) == pytest.approx(1.0)
+
+
+def test_estimator_builds_the_rolling_state_and_refuses_garbage():
+    x = lcs_state([0.6, 0.0, 0.1, 0, 0, 0], [0.65, 0.01, 0.02], [0.0, 0.1, 0.0], 0.0315)
+    assert x[BALL_POS][2] == 0.0315              # the model's radius, not the measurement
+    assert np.allclose(x[BALL_QUAT], [1, 0, 0, 0])
+    # rolling without slip: contact point velocity v + w x (-R z) = 0
+    contact_v = np.array([0, 0.1, 0]) + np.cross(x[BALL_ANGVEL], [0, 0, -0.0315])
+    assert np.allclose(contact_v, 0, atol=1e-12)
+    assert np.all(np.isnan(lcs_state([np.nan] * 6, [0.6, 0, 0], [0, 0, 0], 0.0315)))
+
+
+def test_pose_sensor_holds_its_estimate_on_a_nonfinite_measurement():
+    from pydrake.systems.analysis import Simulator
+    from adaptive_c3.systems.ball_pose_sensor import BallPoseSensor
+    sensor = BallPoseSensor(alpha=1.0)
+    sim = Simulator(sensor)
+    ctx = sim.get_mutable_context()
+    sensor.get_input_port().FixValue(ctx, np.r_[1, 0, 0, 0, 0.6, 0.05, 0.03, np.zeros(6)])
+    sim.AdvanceTo(0.03)
+    position = sensor.GetOutputPort("ball.position")
+    assert np.allclose(position.Eval(ctx), [0.6, 0.05, 0.03])
+    sensor.get_input_port().FixValue(ctx, np.full(13, np.nan))
+    sim.AdvanceTo(0.06)
+    assert np.allclose(position.Eval(ctx), [0.6, 0.05, 0.03])
+
+
+def _run(tmp_path, *overrides):
+    from adaptive_c3.tools.run import run_scenario
+    summary, out = run_scenario(SCENARIO, tmp_path / "run", [*FAST, *overrides])
+    assert (out / "path.png").exists() and (out / "residual.png").exists()
+    assert json.loads((out / "summary.json").read_text())["laps"] == summary["laps"]
+    return summary
+
+
+def test_right_model_rolls_the_ball_along_the_circle(tmp_path):
+    s = _run(tmp_path, "model.radius_error=0.0", "learner.enabled=false",
+             "sim_duration_s=8")
+    assert s["first_contact_s"] is not None and s["first_contact_s"] < 2.0
+    assert s["circle_progress"] > 0.25          # counter-clockwise, a quarter in 8 s
+    assert s["tracking_rmse_m"] < 0.03
+
+
+def test_too_large_model_ball_pushes_at_air_without_adaptation(tmp_path):
+    s = _run(tmp_path, "learner.enabled=false", "sim_duration_s=6")
+    assert s["first_contact_s"] is None
+    assert s["laps"] == 0 and abs(s["circle_progress"]) < 0.01
+    assert s["ee_ball_gap_offset_m"] == 0.0
+
+
+def test_adaptation_learns_the_gap_in_the_right_direction(tmp_path):
+    s = _run(tmp_path, "sim_duration_s=8")
+    # the true ball's top is 2 x 5 mm below the model's: the learned offset must grow
+    assert s["ee_ball_gap_offset_m"] > 0.003
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("adaptation, min_laps, max_laps", [(True, 4, 99), (False, 0, 0)])
+def test_paper_experiment_panda_with_camera(tmp_path, adaptation, min_laps, max_laps):
+    from adaptive_c3.tools.run import run_scenario
+    summary, _ = run_scenario(SCENARIO, tmp_path / "run",
+                              [f"learner.enabled={str(adaptation).lower()}"])
+    assert min_laps <= summary["laps"] <= max_laps
+
+
+def test_scenario_loads_and_rejects_bad_gait():
+    s, _ = load_scenario(SCENARIO)
+    assert s.task == "ball_rolling" and s.model.radius_error == 0.005
+    from adaptive_c3.scenarios.schema import ScenarioError
+    with pytest.raises(ScenarioError, match="gait.roll_s"):
+        load_scenario(SCENARIO, ["gait.roll_s=-1"])
