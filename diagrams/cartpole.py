@@ -65,7 +65,8 @@ def learner_options(cfg, num_lambda: int):
     from adaptive_c3.systems.violation_loss import LearnerOptions
     return LearnerOptions(epsilon=cfg.epsilon, gamma=cfg.gamma,
                           learning_rate=cfg.learning_rate, batch_size=cfg.batch_size,
-                          Qd=list(cfg.qd_diag) or None, max_step=cfg.max_step)
+                          Qd=list(cfg.qd_diag) or None, max_step=cfg.max_step,
+                          lr_decay_steps=cfg.lr_decay_steps)
 
 
 def _kick_source(s: CartpoleScenario, dt: float):
@@ -83,12 +84,15 @@ def _kick_source(s: CartpoleScenario, dt: float):
     return TrajectorySource(PiecewisePolynomial.ZeroOrderHold(t[keep], v))
 
 
-def build_cartpole_diagram(s: CartpoleScenario) -> CartpoleDiagram:
-    true_lcs, model_lcs = cartpole_models(s)
+def build_cartpole_diagram(s: CartpoleScenario, model_lcs: Lcs | None = None) -> CartpoleDiagram:
+    """The diagram of scenario s; model_lcs (optional) replaces the controller's model."""
+    true_lcs, scenario_model = cartpole_models(s)
+    model_lcs = scenario_model if model_lcs is None else model_lcs
     builder = DiagramBuilder()
 
     plant = builder.AddNamedSystem("cartpole", LcsPlant(true_lcs, s.initial_state))
     dt = true_lcs.dt
+    kicks = None
     if s.disturbances:
         kicks = builder.AddNamedSystem("kicks", _kick_source(s, dt))
         builder.Connect(kicks.get_output_port(), plant.GetInputPort("disturbance"))
@@ -121,9 +125,12 @@ def build_cartpole_diagram(s: CartpoleScenario) -> CartpoleDiagram:
         if s.learner.enabled:
             from adaptive_c3.systems.residual_learner import ResidualLearner
             learner = builder.AddNamedSystem("residual_learner", ResidualLearner(
-                learner_options(s.learner, 2), 4, 1, 2, rate_hz=s.learner.rate_hz))
+                learner_options(s.learner, 2), 4, 1, 2, rate_hz=s.learner.rate_hz,
+                input_lag=1))  # C3's input is state set at the plant's step instant
             builder.Connect(measured, learner.GetInputPort("state"))
             builder.Connect(model_port, learner.GetInputPort("lcs"))
+            if kicks is not None:  # the injected kicks are known: the plant steps from x + kick
+                builder.Connect(kicks.get_output_port(), learner.GetInputPort("disturbance"))
             model_port = learner.GetOutputPort("lcs_with_residual")
         controller = builder.AddNamedSystem("c3_controller", C3Controller(
             cartpole_c3_options(s), 4, 1, 2, rate_hz=s.c3.rate_hz))

@@ -52,6 +52,7 @@ class LearnerConfig:
     batch_size: int = 10           # n_b
     rate_hz: float = 20.0          # update rate, Hz
     max_step: float = 0.01         # bound on one update of any entry
+    lr_decay_steps: float = 0.0    # optional: step size xi / (1 + t / this), t = Adam steps; 0 = off
     qd_diag: List[float] = dc.field(default_factory=list)  # Q_d diagonal (empty = identity)
 
 

@@ -17,6 +17,23 @@ rate_hz / stride). If the incoming LCS declares a dt (> 0) that differs from
 transition_dt, the update raises ValueError: the learner never silently pairs states
 at the wrong spacing.
 
+Input timing (`input_lag`). Drake applies a time step's unrestricted updates before its
+discrete updates, so a controller whose output is state set by an unrestricted (or
+discrete) update at the same instant as the plant's step (C3Controller) hands the plant
+the input computed *at* t, while the learner, updated at t too, still reads the previous
+one. Then the input applied from the sample at t is the one the learner reads at t + 1/rate:
+set input_lag=1 and u_k is averaged over the S samples after x_k instead of from x_k on.
+With a feedthrough controller (output computed from the state input) keep input_lag=0.
+Mispairing shifts the input by one step, a prediction error of B (u_k - u_{k-1}) that the
+loss can only read as contact, and the residual drifts wherever C3's input changes fast.
+
+Known disturbances. The optional `disturbance` input (n) is a state increment the
+plant adds at the start of its step (LcsPlant's port of the same name: the plant steps
+from x_k + w_k), e.g. an injected excitation kick. With S = 1 the learner uses x_k + w_k
+as the transition's start state; with S > 1 a transition whose span holds a nonzero w is
+skipped. Unconnected, w = 0. Without it an injected kick is an unexplained velocity jump
+that the loss can only explain as a contact force, which biases r_comp toward contact.
+
 Guards: non-finite samples are skipped and counted (`num_rejected` in the state); epsilon
 and gamma are checked against each sample's F (ValueError); each Adam update is clipped to
 +-options.max_step per entry.
@@ -47,7 +64,7 @@ class _Memory:
     __slots__ = ("history", "buffer", "count")
 
     def __init__(self, history=(), buffer=(), count=0):
-        self.history = history  # tuple of (x, u, lcs), newest last, at most S + 1
+        self.history = history  # tuple of (x, u, lcs, w), newest last, at most S + 1
         self.buffer = buffer    # tuple of PreparedSample, newest last, at most n_b
         self.count = count      # transitions formed so far (for the stride)
 
@@ -68,6 +85,8 @@ class ResidualLearner(LeafSystem):
       input   (k)         applied input u.
       lcs     (abstract)  Lcs: the prior model theta* at the current state.
       enable  (1)         optional; > 0.5 learns. Unconnected: the `enabled` argument.
+      disturbance (n)     optional; known state increment applied at the start of the
+                          plant's step (see the module doc). Unconnected: zero.
     Output ports:
       r_comp             (m)         the current residual.
       loss               (1)         mean l_eps over the buffer at the last update (NaN
@@ -78,7 +97,7 @@ class ResidualLearner(LeafSystem):
     sampling rate; enabled, used when the enable port is unconnected; transition_dt (s,
     default 1/rate_hz) and transition_stride (see the module doc; ball rolling:
     rate_hz=200, transition_dt=0.1, transition_stride=10 -> one step at 20 Hz);
-    initial_residual (default zeros). For a discrete plant stepping at the LCS dt, use
+    initial_residual (default zeros); input_lag (0 or 1, see the module doc). For a discrete plant stepping at the LCS dt, use
     rate_hz = 1/dt: sampling such a plant faster than it steps would pair held states
     with inputs it never used.
     """
@@ -86,8 +105,11 @@ class ResidualLearner(LeafSystem):
     def __init__(self, options: LearnerOptions, num_states: int, num_inputs: int,
                  num_lambda: int, rate_hz: float = 20.0, enabled: bool = True,
                  transition_dt: float | None = None, transition_stride: int = 1,
-                 initial_residual=None):
+                 initial_residual=None, input_lag: int = 0):
         super().__init__()
+        if input_lag not in (0, 1):
+            raise ValueError(f"ResidualLearner input_lag must be 0 or 1, got {input_lag}")
+        self._lag = int(input_lag)
         n, k, m = int(num_states), int(num_inputs), int(num_lambda)
         if min(n, k, m) < 1:
             raise ValueError("ResidualLearner needs num_states, num_inputs, num_lambda >= 1")
@@ -129,6 +151,7 @@ class ResidualLearner(LeafSystem):
         self.DeclareVectorInputPort("input", k)
         self.DeclareAbstractInputPort("lcs", AbstractValue.Make(self._placeholder))
         self.DeclareVectorInputPort("enable", 1)
+        self.DeclareVectorInputPort("disturbance", n)
 
         self.DeclareVectorOutputPort("r_comp", m, self._calc_r,
                                      {self.discrete_state_ticket(self._xs)})
@@ -204,20 +227,31 @@ class ResidualLearner(LeafSystem):
             return bool(port.Eval(context)[0] > 0.5)
         return self._enabled_default
 
+    def _disturbance(self, context):
+        port = self.get_input_port(4)
+        if port.HasValue(context):
+            return np.array(port.Eval(context), float)
+        return None
+
     def _update(self, context, state):
         x = np.array(self.get_input_port(0).Eval(context), float)
         u = np.array(self.get_input_port(1).Eval(context), float)
         lcs = self._read_lcs(context)
+        w = self._disturbance(context)
         mem = context.get_abstract_state(self._mem).get_value()
         vec = context.get_discrete_state(self._xs).get_value().copy()
 
-        history = (mem.history + ((x, u, lcs),))[-(self._S + 1):]
+        history = (mem.history + ((x, u, lcs, w),))[-(self._S + 1):]
         buffer, count = mem.buffer, mem.count
         appended = False
         if len(history) == self._S + 1:
-            x_k, _, lcs_k = history[0]
-            u_k = np.mean([h[1] for h in history[:-1]], axis=0)
-            if count % self._stride == 0:
+            x_k, _, lcs_k, _ = history[0]
+            u_k = np.mean([h[1] for h in history[self._lag:self._S + self._lag]], axis=0)
+            ws = [h[3] for h in history[:-1] if h[3] is not None and np.any(h[3] != 0)]
+            skip = bool(ws) and self._S > 1
+            if ws and not skip:
+                x_k = x_k + ws[0]  # S = 1: the plant stepped from x_k + w_k
+            if count % self._stride == 0 and not skip:
                 s = prepare_sample(x, x_k, u_k, lcs_k, self._opts.epsilon,
                                    self._opts.gamma, self._Qd)
                 if s is None:
@@ -229,7 +263,11 @@ class ResidualLearner(LeafSystem):
 
         if appended and len(buffer) == self._opts.batch_size:
             r = vec[self._i_r]
-            loss, grad, used = batch_loss_and_grad(buffer, r)
+            try:
+                loss, grad, used = batch_loss_and_grad(buffer, r)
+            except RuntimeError:   # a QP not solved to tolerance: skip this step
+                loss, grad, used = np.nan, None, 0
+                vec[self._i_rej] += 1
             vec[self._i_loss] = loss
             if used and self._is_enabled(context):
                 delta, m1, m2, t = adam_update(grad, vec[self._i_m1], vec[self._i_m2],

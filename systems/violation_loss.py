@@ -13,54 +13,33 @@ The inner problem is a strictly convex QP in y = (lam, eta) with simple bounds w
 
     dl/dr = (1/(eps gamma)) w*,   w* = q + F lam* + r - eta*.
 
-How the QP is solved (exactly, not approximately):
+How the QP is solved (exactly):
 
-* Scaling. eps can be 1e-7, so the unscaled objective mixes terms ~9 orders of magnitude apart. We solve
-  J(y) = eps * l(y) = 1/2 y' H y + g' y + const instead, with
+* Scaling: eps can be 1e-7, so we solve J(y) = eps * l(y) = 1/2 y' H y + g' y + const,
       H = [[eps D'Qd D + F'F/gamma, I - F'/gamma], [I - F/gamma, I/gamma]],
       g = [eps D'Qd z + F'(q + r)/gamma, -(q + r)/gamma],
-  whose entries are O(1/gamma) whatever eps is (the eps term only adds).
-* Method. Block principal pivoting (Judice & Pires) on the KKT conditions of the
-  bound-constrained QP, which are the LCP y >= 0, H y + g >= 0, y'(H y + g) = 0 with H
-  positive definite: guess the free set, solve H_FF y_F = -g_F (one small dense solve),
-  flip every infeasible index; after 3 rounds without fewer infeasibilities it falls back
-  to Murty's single least-index flip, which is finite for P-matrices. It enumerates
-  nothing; warm-started from the free set of the previous call for the same sample it
-  usually stops after one solve.
-* Polishing. Given lam, the best eta is closed-form, eta = max(0, q + r + F lam -
-  gamma lam), so after the pivoting lam is clipped at 0 and eta recomputed; then
-  w* = min(q + r + F lam, gamma lam) element-wise. In the "neither" case (no contact in
-  the data, none predicted) lam* = 0 exactly and so the gradient is exactly zero.
-* Exactness. Every solve is checked: the KKT residual is the natural residual
-  max_i |min(y_i, (H y + g)_i)| of the eps-scaled problem J, i.e. an absolute error in
-  the units of q (distance, for the lam rows) and of lam (for the eta rows). It must be
-  <= KKT_TOL = 1e-8, else RuntimeError. (For the unscaled l the same point has residual
-  KKT/eps: the tolerance is deliberately stated on J.)
+  whose entries are O(1/gamma) whatever eps is.
+* Method: block principal pivoting (Judice & Pires) on the KKT conditions, the LCP
+  y >= 0, H y + g >= 0, y'(H y + g) = 0 with H positive definite: guess the free set,
+  solve H_FF y_F = -g_F, flip every infeasible index; after 3 rounds without fewer
+  infeasibilities, Murty's single least-index flip (finite for P-matrices). Warm-started
+  from the previous free set of the same sample it usually stops after one solve.
+* Polishing: given lam the best eta is eta = max(0, q + r + F lam - gamma lam), so lam
+  is clipped at 0 and eta recomputed; w* = min(q + r + F lam, gamma lam). With no
+  contact in data or model lam* = 0 exactly and the gradient is exactly zero.
+* Exactness: the natural KKT residual max_i |min(y_i, (H y + g)_i)| of J (units of q for
+  the lam rows, of lam for the eta rows) must be <= KKT_TOL = 1e-8, else RuntimeError.
 
 Batched loss and gradient are the mean over the buffer. `adam_update` is Adam with a
-mask of learned entries and a hard clip of each update to +-max_step (default 0.01, the
-units of c): one bad batch cannot move any residual entry by more than max_step.
+mask of learned entries, an optional inverse-time step-size decay, and a hard clip of
+each update to +-max_step (units of c): one bad batch cannot move an entry further.
 
-Q_d for the cart-pole: the state mixes positions and velocities, but one LCS step at
-dt = 0.01 moves positions by dt*velocity, so D (and z from contact) sit almost entirely
-in the velocity rows; Q_d = I weights the velocity error and is what we use (positions
-add nothing that velocities do not already show).
-
-About eps (and Q_d). The minimiser (lam*, eta*) depends on eps only through eps Q_d;
-eps alone scales l and dl/dr by 1/eps, which Adam's normalisation ignores. Where the
-model (with r) predicts no contact, q + r >= 0, the KKT conditions of lam = 0,
-eta = q + r show the gradient is exactly zero iff also
-    q + r + eps D'Qd z >= 0.
-Where the model predicts contact ("both" with a wrong model, "predicted only") the
-gradient is nonzero for any eps (it vanishes only where the model explains the data). Where only the data has contact (z = -D lam_true) it
-is nonzero only where the model's gap q + r is below eps (D'Qd D lam_true): next to the
-true contact boundary (lam_true -> 0) there is always a band of zero gradient, of width
-|dc| / (1 + eps a k) in the contact distance (dc the model's offset error,
-a = (D'Qd D)_ii, k the contact stiffness). Cart-pole with Q_d = I (a = 8.1e-3, k = 50,
-dc = 0.15 m): eps = 1e-3 leaves the whole contact-only region flat, eps = 1 about 70 % of it, eps = 100 a band of 3.7 mm of pole-tip travel.
-So for the cart-pole use Q_d = I, eps = 100 (the dynamics and violation terms are then
-of the same size), gamma = 1e-2 (sigma_min(F + F') = 0.04). The paper's eps = 1e-7 goes
-with Q_d = 1e5 and the ball's much larger D.
+About eps: the minimiser depends on eps only through eps Q_d (eps alone scales dl/dr,
+which Adam ignores). Where only the data has contact the gradient is nonzero only where
+q + r < eps D'Qd D lam_true: a zero-gradient band of width |dc| / (1 + eps a k) remains
+(dc the offset error, a = (D'Qd D)_ii, k the stiffness). Cart-pole, Q_d = I (a = 8.1e-3,
+k = 50, dc = 0.15): eps = 1e-3 leaves all of it flat, eps = 100 a 3.7 mm band; so
+eps = 100, gamma = 1e-2 there. The paper's eps = 1e-7 goes with Q_d = 1e5 (ball).
 """
 from __future__ import annotations
 
@@ -97,6 +76,8 @@ class LearnerOptions:
     mask: which residual entries are learned (None -> all); a length-m bool list.
     max_step: clip of each Adam update per entry (units of c; e.g. m for walls).
     beta1, beta2, adam_eps: Adam's moment decays and denominator guard.
+    lr_decay_steps: optional inverse-time decay of the step size, xi_t = xi / (1 + t / T)
+        with t the Adam step count and T = lr_decay_steps; 0 (default) keeps xi fixed.
     """
 
     epsilon: float
@@ -109,30 +90,25 @@ class LearnerOptions:
     beta1: float = 0.9
     beta2: float = 0.999
     adam_eps: float = 1e-8
+    lr_decay_steps: float = 0.0
 
     def __post_init__(self):
         check_epsilon(self.epsilon)
-        g = float(self.gamma)
-        if not np.isfinite(g) or g <= 0:
-            raise ValueError(f"learner gamma must be > 0 (and < sigma_min(F + F')), got {g}")
-        lr = float(self.learning_rate)
-        if not np.isfinite(lr) or lr <= 0:
-            raise ValueError(f"learner learning_rate must be > 0, got {lr}")
-        if (isinstance(self.batch_size, bool) or int(self.batch_size) != self.batch_size
-                or int(self.batch_size) < 1):
-            raise ValueError(f"learner batch_size must be a positive integer, got "
-                             f"{self.batch_size}")
-        object.__setattr__(self, "batch_size", int(self.batch_size))
-        ms = float(self.max_step)
-        if not np.isfinite(ms) or ms <= 0:
-            raise ValueError(f"learner max_step must be > 0, got {ms}")
-        for name in ("beta1", "beta2"):
-            b = float(getattr(self, name))
-            if not 0.0 <= b < 1.0:
-                raise ValueError(f"learner {name} must be in [0, 1), got {b}")
-        ae = float(self.adam_eps)
-        if not np.isfinite(ae) or ae <= 0:
-            raise ValueError(f"learner adam_eps must be > 0, got {ae}")
+        bs = self.batch_size
+        if isinstance(bs, bool) or int(bs) != bs or int(bs) < 1:
+            raise ValueError(f"learner batch_size must be a positive integer, got {bs}")
+        object.__setattr__(self, "batch_size", int(bs))
+        for name, ok, what in (
+                ("gamma", lambda v: v > 0, "> 0 (and < sigma_min(F + F'))"),
+                ("learning_rate", lambda v: v > 0, "> 0"),
+                ("max_step", lambda v: v > 0, "> 0"),
+                ("beta1", lambda v: 0 <= v < 1, "in [0, 1)"),
+                ("beta2", lambda v: 0 <= v < 1, "in [0, 1)"),
+                ("lr_decay_steps", lambda v: v >= 0, ">= 0 (0 = off)"),
+                ("adam_eps", lambda v: v > 0, "> 0")):
+            v = float(getattr(self, name))
+            if not (np.isfinite(v) and ok(v)):
+                raise ValueError(f"learner {name} must be {what}, got {v}")
 
     def mask_array(self, m: int) -> np.ndarray:
         """The learned-entry mask as a length-m bool array."""
@@ -156,13 +132,8 @@ def check_epsilon(epsilon: float) -> float:
 
 
 def check_gamma(F, gamma: float) -> float:
-    """Validate 0 < gamma < sigma_min(F + F'); returns sigma_min(F + F').
-
-    F + F' must be positive definite (then its singular values are its eigenvalues);
-    otherwise the loss is not convex in (lam, eta) and no gamma is valid.
-    """
-    F = np.asarray(F, float)
-    g = float(gamma)
+    """Validate 0 < gamma < sigma_min(F + F') (F + F' must be PD); returns the sigma_min."""
+    F, g = np.asarray(F, float), float(gamma)
     S = F + F.T
     smin = float(np.linalg.eigvalsh(S)[0]) if S.size else np.inf
     if not smin > 0:
@@ -198,21 +169,17 @@ def qd_matrix(Qd, n: int) -> np.ndarray:
 
 # --------------------------------------------------------------------------- samples
 class PreparedSample:
-    """One transition turned into its QP data (the r-independent parts).
-
-    Holds z, q, D, F, Q_d, the eps-scaled Hessian H and b = eps D'Qd z. `free` is the
-    warm-start guess of the free set and `_inv` caches the inverses of H's principal
-    blocks for recently used free sets (updated by every solve; results never depend on
-    them, only speed).
-    """
+    """One transition's r-independent QP data: z, q, D, F, Q_d, the eps-scaled Hessian H,
+    b = eps D'Qd z; `free` (warm-start free set) and `_inv` (cached inverses of H's
+    principal blocks) only affect speed, never results."""
 
     __slots__ = ("z", "q", "D", "F", "Qd", "H", "b", "epsilon", "gamma", "free", "FtG",
                  "_inv")
 
     def __init__(self, z, q, D, F, Qd, epsilon, gamma):
         m = q.shape[0]
-        self.z, self.q, self.D, self.F, self.Qd = z, q, D, F, Qd
-        self.epsilon, self.gamma = epsilon, gamma
+        self.z, self.q, self.D, self.F, self.Qd, self.epsilon, self.gamma = (
+            z, q, D, F, Qd, epsilon, gamma)
         QD = Qd @ D
         inv_g = 1.0 / gamma
         H = np.empty((2 * m, 2 * m))
@@ -223,9 +190,7 @@ class PreparedSample:
         self.H = 0.5 * (H + H.T)
         self.b = epsilon * (QD.T @ z)
         self.FtG = F.T * inv_g
-        free = np.zeros(2 * m, dtype=bool)
-        free[m:] = True  # the "no contact" guess: lam = 0, eta = q + r
-        self.free = free
+        self.free = np.arange(2 * m) >= m  # the "no contact" guess: lam = 0, eta = q + r
         self._inv = {}
 
     def reduced_inverse(self, free):
@@ -244,14 +209,9 @@ class PreparedSample:
 def prepare_sample(x_next, x, u, lcs: Lcs, epsilon: float, gamma: float,
                    Qd=None, check: bool = True) -> PreparedSample | None:
     """The QP data of one transition, or None if any of x_next, x, u is non-finite.
-
-    Qd may be anything `qd_matrix` accepts (an n x n array is used as is). With
-    check=True, epsilon and gamma are validated (ValueError) against this LCS's F.
-    """
+    Qd: anything `qd_matrix` accepts; check=True validates epsilon, gamma against F."""
     n, k = lcs.num_states, lcs.num_inputs
-    x_next = np.asarray(x_next, float).reshape(-1)
-    x = np.asarray(x, float).reshape(-1)
-    u = np.asarray(u, float).reshape(-1)
+    x_next, x, u = (np.asarray(v, float).reshape(-1) for v in (x_next, x, u))
     for name, v, size in (("x_next", x_next, n), ("x", x, n), ("u", u, k)):
         if v.shape != (size,):
             raise ValueError(f"transition {name} has {v.size} entries, the LCS expects {size}")
@@ -268,11 +228,9 @@ def prepare_sample(x_next, x, u, lcs: Lcs, epsilon: float, gamma: float,
 
 @dataclass(frozen=True)
 class SampleSolution:
-    """The inner QP's solution for one sample at residual r.
-
-    lam, eta: the minimiser; loss: l_eps (unscaled); grad: dl/dr; w: q + F lam + r - eta;
-    kkt: natural KKT residual of the eps-scaled QP; iterations: pivoting rounds.
-    """
+    """One sample's inner QP solution at r: lam, eta (the minimiser); loss l_eps
+    (unscaled); grad dl/dr; w = q + F lam + r - eta; kkt (natural KKT residual of the
+    eps-scaled QP); iterations (pivoting rounds)."""
 
     lam: np.ndarray
     eta: np.ndarray
@@ -284,14 +242,9 @@ class SampleSolution:
 
 
 def _pivot(s: PreparedSample, g, tol):
-    """Block principal pivoting for min 1/2 y'Hy + g'y s.t. y >= 0 (H PD).
-
-    Returns (y, free, rounds). Starts from s.free.
-    """
-    H = s.H
-    free = s.free
-    best = g.shape[0] + 1
-    backup = 3
+    """Block principal pivoting for min 1/2 y'Hy + g'y s.t. y >= 0 (H PD), from s.free.
+    Returns (y, free, rounds)."""
+    H, free, best, backup = s.H, s.free, g.shape[0] + 1, 3
     for it in range(1, _MAX_PIVOTS + 1):
         idx, inv = s.reduced_inverse(free)
         y = np.zeros(g.shape[0])
@@ -364,15 +317,11 @@ def violation_loss(x_next, x, u, lcs: Lcs, r, epsilon: float, gamma: float,
 
 
 def solve_batch(samples: Sequence[PreparedSample], r):
-    """Solve the QPs of several samples (same m and n) at r together, vectorised.
-
-    The same block pivoting as `solve_sample`, run on all samples at once: a free set F
-    is solved as the masked system (H on F x F, identity elsewhere) with one batched
-    LU call per round. Returns (lam [B, m], eta [B, m], loss [B], grad [B, m], kkt [B]).
-    Samples whose batched solve misses KKT_TOL are re-solved one by one (with refinement).
-    """
-    B = len(samples)
-    m = samples[0].q.shape[0]
+    """Solve the QPs of several samples (same m, n) at r together: `solve_sample`'s
+    pivoting with one batched LU per round (free set F as H on F x F, identity elsewhere).
+    Returns (lam [B, m], eta [B, m], loss [B], grad [B, m], kkt [B]); samples missing
+    KKT_TOL are re-solved one by one (with refinement)."""
+    B, m = len(samples), samples[0].q.shape[0]
     nv = 2 * m
     r = np.asarray(r, float)
     H = np.stack([s.H for s in samples])
@@ -386,14 +335,10 @@ def solve_batch(samples: Sequence[PreparedSample], r):
     g[:, m:] = -qr / gam[:, None]
     tol = 1e-13 * np.maximum(1.0, np.abs(g).max(axis=1))
     free = np.stack([s.free for s in samples])
-    best = np.full(B, nv + 1)
-    backup = np.full(B, 3)
-    eye = np.eye(nv)
-    y = np.zeros((B, nv))
-    todo = np.arange(B)
+    best, backup = np.full(B, nv + 1), np.full(B, 3)
+    eye, y, todo = np.eye(nv), np.zeros((B, nv)), np.arange(B)
     for _ in range(_MAX_PIVOTS):
-        f = free[todo]
-        Ht = H[todo]
+        f, Ht = free[todo], H[todo]
         M = Ht * (f[:, :, None] & f[:, None, :]) + eye * ~f[:, None, :]
         yt = np.linalg.solve(M, (-g[todo] * f)[:, :, None])[:, :, 0]
         yt[~f] = 0.0
@@ -444,11 +389,8 @@ def solve_batch(samples: Sequence[PreparedSample], r):
 
 
 def batch_loss_and_grad(samples: Sequence[PreparedSample], r) -> tuple[float, np.ndarray, int]:
-    """Mean loss and mean gradient over the samples; returns (loss, grad, n_used).
-
-    Samples whose solution is non-finite are skipped (not counted in the mean); with no
-    usable sample the loss is NaN and the gradient zero.
-    """
+    """Mean loss and gradient over the samples; returns (loss, grad, n_used). Samples with
+    a non-finite solution are skipped; with none usable: NaN loss, zero gradient."""
     r = np.asarray(r, float)
     samples = list(samples)
     if not samples:
@@ -463,12 +405,10 @@ def batch_loss_and_grad(samples: Sequence[PreparedSample], r) -> tuple[float, np
 
 # --------------------------------------------------------------------------- Adam
 def adam_update(grad, m1, m2, t: int, options: LearnerOptions, mask=None):
-    """One Adam step. Returns (delta, m1, m2, t) with delta the change to add to r.
-
-    Entries outside the mask get no gradient, keep their moments and a zero delta. The
-    delta is clipped element-wise to +-options.max_step. A non-finite gradient gives a
-    zero delta and leaves the state unchanged.
-    """
+    """One Adam step; returns (delta, m1, m2, t), delta the change to add to r. Entries
+    outside the mask keep their moments and get a zero delta; delta is clipped to
+    +-options.max_step; a non-finite gradient gives a zero delta and no state change.
+    The step size is options.learning_rate / (1 + t / lr_decay_steps) if that is > 0."""
     grad = np.asarray(grad, float)
     mask = np.ones(grad.shape[0], bool) if mask is None else np.asarray(mask, bool)
     if not np.all(np.isfinite(grad)):
@@ -480,7 +420,10 @@ def adam_update(grad, m1, m2, t: int, options: LearnerOptions, mask=None):
     m2 = np.where(mask, b2 * m2 + (1 - b2) * g * g, m2)
     mhat = m1 / (1 - b1 ** t)
     vhat = m2 / (1 - b2 ** t)
-    delta = -options.learning_rate * mhat / (np.sqrt(vhat) + options.adam_eps)
+    lr = options.learning_rate
+    if options.lr_decay_steps > 0:
+        lr = lr / (1.0 + t / options.lr_decay_steps)
+    delta = -lr * mhat / (np.sqrt(vhat) + options.adam_eps)
     delta = np.clip(np.where(mask, delta, 0.0), -options.max_step, options.max_step)
     return delta, m1, m2, t
 
@@ -515,9 +458,7 @@ class ViolationLossLearner:
         self.mask = options.mask_array(self.num_lambda)
         self.r = (np.zeros(self.num_lambda) if initial_residual is None
                   else _check_r(initial_residual, self.num_lambda).copy())
-        self.m1 = np.zeros(self.num_lambda)
-        self.m2 = np.zeros(self.num_lambda)
-        self.t = 0
+        self.m1, self.m2, self.t = np.zeros(self.num_lambda), np.zeros(self.num_lambda), 0
         self.num_rejected = 0  # non-finite transitions refused so far
         self._Qd_cache: dict[int, np.ndarray] = {}
 
@@ -526,9 +467,9 @@ class ViolationLossLearner:
         if lcs.num_lambda != self.num_lambda:
             raise ValueError(f"LCS has m={lcs.num_lambda}, the learner m={self.num_lambda}")
         n = lcs.num_states
-        Q = self._Qd_cache.get(n)
-        if Q is None:
-            Q = self._Qd_cache[n] = qd_matrix(self.options.Qd, n)
+        if n not in self._Qd_cache:
+            self._Qd_cache[n] = qd_matrix(self.options.Qd, n)
+        Q = self._Qd_cache[n]
         s = prepare_sample(x_next, x, u, lcs, self.options.epsilon, self.options.gamma, Q)
         if s is None:
             self.num_rejected += 1

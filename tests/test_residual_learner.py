@@ -184,3 +184,76 @@ def test_lcs_step_must_match_the_transition_span():
     params = CartpoleParams(dt=0.05)
     with pytest.raises(Exception, match="dt"):
         build(enable=1.0, model=cartpole_lcs(params, DPHI)).sim.AdvanceTo(0.1)
+
+
+class _HeldShaker(_Shaker):
+    """The shaker's input held in state, recomputed in an unrestricted update at every
+    plant step (as C3Controller does): the plant, stepping at the same instant, gets the
+    new value while a learner updated at that instant still reads the old one."""
+
+    def __init__(self, lcs, period=0.01):
+        LeafSystem.__init__(self)
+        P = scipy.linalg.solve_discrete_are(lcs.A, lcs.B, np.diag([10, 3, 1, 1]), np.eye(1))
+        self._K = np.linalg.solve(np.eye(1) + lcs.B.T @ P @ lcs.B, lcs.B.T @ P @ lcs.A)
+        self.DeclareVectorInputPort("state", 4)
+        held = self.DeclareDiscreteState(1)
+        self.DeclareStateOutputPort("u", held)
+        self.DeclarePeriodicUnrestrictedUpdateEvent(period, 0.0, self._hold)
+
+    def _hold(self, context, state):
+        x = self.get_input_port(0).Eval(context)
+        state.get_mutable_discrete_state(0).SetFromVector(
+            -self._K @ x + 20.0 * np.sin(np.pi * context.get_time()))
+
+
+def _run_at_dphi(held=False, input_lag=0, kick_at=None, tell_learner=True, t_end=4.0):
+    """Learner started at r = delta_phi; returns max_t |r - delta_phi| and the steps.
+    With the transitions paired right every sample is explained exactly (gradient zero
+    to rounding); Adam's scale invariance still turns rounding-level gradients into
+    steps of up to ~lr, so r wanders by a few lr at most, never more."""
+    from pydrake.systems.primitives import TrajectorySource
+    from pydrake.trajectories import PiecewisePolynomial
+    b = DiagramBuilder()
+    plant = b.AddSystem(LcsPlant(TRUE, np.zeros(4)))
+    shaker = b.AddSystem(_HeldShaker(TRUE) if held else _Shaker(TRUE))
+    learner = b.AddSystem(ResidualLearner(OPTS, 4, 1, 2, rate_hz=100.0,
+                                          initial_residual=DPHI, input_lag=input_lag))
+    src = b.AddSystem(ConstantValueSource(AbstractValue.Make(MODEL)))
+    b.Connect(plant.get_output_port(0), shaker.get_input_port(0))
+    b.Connect(shaker.get_output_port(0), plant.get_input_port(0))
+    b.Connect(plant.get_output_port(0), learner.GetInputPort("state"))
+    b.Connect(shaker.get_output_port(0), learner.GetInputPort("input"))
+    b.Connect(src.get_output_port(0), learner.GetInputPort("lcs"))
+    if kick_at is not None:
+        kick = np.array([0.0, 0.0, 3.0, 0.0])
+        traj = PiecewisePolynomial.ZeroOrderHold(
+            [0.0, kick_at, kick_at + 0.005, 100.0], np.stack([0 * kick, kick, 0 * kick, 0 * kick]).T)
+        ks = b.AddSystem(TrajectorySource(traj))
+        b.Connect(ks.get_output_port(), plant.GetInputPort("disturbance"))
+        if tell_learner:
+            b.Connect(ks.get_output_port(), learner.GetInputPort("disturbance"))
+    log = b.AddSystem(VectorLogSink(2, publish_period=0.01))
+    b.Connect(learner.GetOutputPort("r_comp"), log.get_input_port(0))
+    sim = Simulator(b.Build())
+    sim.AdvanceTo(t_end)
+    ctx = learner.GetMyContextFromRoot(sim.get_context())
+    r = log.FindLog(sim.get_context()).data().T
+    return float(np.abs(r - DPHI).max()), learner.num_steps(ctx)
+
+
+def test_input_lag_pairs_a_held_controller_input_with_its_step():
+    dev, steps = _run_at_dphi(held=True, input_lag=1)
+    assert steps > 300
+    assert dev < 3 * OPTS.learning_rate
+    assert dev == _run_at_dphi(held=False)[0]  # exactly the feedthrough controller's run
+    dev_bad, _ = _run_at_dphi(held=True, input_lag=0)  # one step late: reads B du as contact
+    assert dev_bad > 10 * OPTS.learning_rate
+    with pytest.raises(ValueError, match="input_lag"):
+        ResidualLearner(OPTS, 4, 1, 2, rate_hz=100.0, input_lag=2)
+
+
+def test_known_disturbance_is_not_read_as_contact():
+    dev, _ = _run_at_dphi(kick_at=1.0)
+    assert dev < 3 * OPTS.learning_rate
+    dev_blind, _ = _run_at_dphi(kick_at=1.0, tell_learner=False)  # a 3 m/s jump read as contact
+    assert dev_blind > 3 * dev and dev_blind > 3 * OPTS.learning_rate

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from adaptive_c3.diagrams.cartpole import build_cartpole_diagram
+from adaptive_c3.diagrams.cartpole import CARTPOLE_Q, CARTPOLE_R, build_cartpole_diagram
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
 
@@ -26,9 +26,17 @@ def time_to_stabilise(t, x, tol):
     return float(t[0] if len(bad) == 0 else t[min(bad[-1] + 1, len(t) - 1)])
 
 
-def simulate_cartpole(scenario, progress_label="cartpole"):
-    """Simulate the scenario; returns (handles, logs dict name -> (t, data), wall seconds)."""
-    handles = build_cartpole_diagram(scenario)
+def closed_loop_cost(x, u, q_diag, r_diag, dt) -> float:
+    """Sum over the logged steps of (x'Qx + u'Ru) dt with C3's diagonal weights."""
+    x, u = np.asarray(x, float), np.asarray(u, float)
+    return float(dt * (np.sum(x * x * np.asarray(q_diag)) + np.sum(u * u * np.asarray(r_diag))))
+
+
+def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None):
+    """Simulate the scenario; returns (handles, logs dict name -> (t, data), wall seconds).
+
+    model_lcs (optional) replaces the controller's model LCS (see build_cartpole_diagram)."""
+    handles = build_cartpole_diagram(scenario, model_lcs)
     simulator = Simulator(handles.diagram)
     context = simulator.get_mutable_context()
     if scenario.measurement_noise:
@@ -78,6 +86,9 @@ def run_cartpole(scenario, scenario_text: str, out: Path) -> dict:
         "max_wall_force_N": {name: float(lam[:, i].max())
                              for i, name in enumerate(handles.lambda_names)},
         "model_wall_offset_error": list(scenario.model.wall_offset_error),
+        "closed_loop_cost": closed_loop_cost(x, u, scenario.c3.q_diag or CARTPOLE_Q,
+                                             scenario.c3.r_diag or CARTPOLE_R,
+                                             handles.true_lcs.dt),
     }
     if hasattr(handles.controller, "solve_time_stats"):
         summary["c3_solve_time"] = handles.controller.solve_time_stats()
