@@ -10,7 +10,8 @@ Recipe (world frame W = robot base frame, table top z = 0):
   5. LCS             Anitescu LCS of the controller model (MODEL radius) at 80 Hz, with
                      the planning dt and with the loop period
   6. learner         residual r_comp on the LCS offsets (200 Hz samples, 0.1 s
-                     transitions, one Adam step per 10 samples = 20 Hz)
+                     transitions, one Adam step per 10 samples = 20 Hz); its input is
+                     the EE force implied by the measured EE motion
   7. planner         C3 on the LCS with residual + the roll/return gait -> EE command
   8. loggers, Meshcat (optional)
 """
@@ -34,6 +35,7 @@ from adaptive_c3.systems.ball_pose_sensor import BallPoseSensor
 from adaptive_c3.systems.ball_rolling_estimator import BallRollingEstimator
 from adaptive_c3.systems.ball_rolling_planner import BallRollingPlanner
 from adaptive_c3.systems.c3 import C3Options
+from adaptive_c3.systems.ee_force_estimator import EeForceEstimator
 from adaptive_c3.systems.residual_learner import ResidualLearner
 from adaptive_c3.systems.rolling_gait import CirclePath, GaitSettings, RollingGait
 from adaptive_c3.systems.violation_loss import LearnerOptions
@@ -97,6 +99,12 @@ def c3_options(s: BallRollingScenario, phase: str, num_lambda: int) -> C3Options
         q_diag=q, qn_diag=q, r_diag=c.r_diag or [0.01] * 3,
         g_diag=c.g_diag or [0.001] * len(STATE_NAMES) + [1000.0] * num_lambda + [0.001] * 3,
         u_diag=c.u_diag or [100.0] * len(STATE_NAMES) + [1.0] * (num_lambda + 3)))
+
+
+def _pair_groups(num_lambda: int) -> list:
+    """The EE-ball rows and the ball-table rows: each pair's edges share one gap."""
+    half = num_lambda // 2
+    return [list(range(half)), list(range(half, num_lambda))]
 
 
 def learner_options(s: BallRollingScenario) -> LearnerOptions:
@@ -178,6 +186,85 @@ def _log(builder, port, name, logs):
     logs[name] = sink
 
 
+@dataclass
+class BallRollingController:
+    """Handles to the controller side (estimator, LCS, learner, planner) of the diagram."""
+    planner: BallRollingPlanner
+    learner: ResidualLearner
+    lcs_system: AnitescuLcsSystem
+    lcs_state: object            # OutputPort: the 19-state estimate
+    ee_desired_state: object     # OutputPort (6): for the impedance controller
+    ee_feedforward_force: object  # OutputPort (3)
+    lambda_names: list
+
+
+def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ball_position,
+                                ball_velocity, *, x_start=None,
+                                ee_start=None) -> BallRollingController:
+    """Adds steps 4-7 (estimator, LCS, learner, planner) reading the given output ports:
+    ee_state (6, EE tip position and velocity in W), ball_position (3) and
+    ball_velocity (3). The same function serves simulation and the LCM bridge."""
+    m = s.model
+    gait = make_gait(s)
+    if x_start is None:
+        x_start = default_state(tuple(ball_start_xy(s)), ball_radius=m.ball_radius,
+                                ee_radius=m.ee_radius)
+    x_start = np.array(x_start, float)
+    if ee_start is None:
+        ee_start = gait.ee_target("settle", x_start)
+    estimator = builder.AddSystem(BallRollingEstimator(m.ball_radius))
+    builder.Connect(ee_state, estimator.GetInputPort("ee.state"))
+    builder.Connect(ball_position, estimator.GetInputPort("ball.position"))
+    builder.Connect(ball_velocity, estimator.GetInputPort("ball.velocity"))
+    lcs_state = estimator.GetOutputPort("lcs_state")
+
+    # 5. LCS at the planning dt and at the loop period
+    x_start[0:3] = ee_start
+    lin_kwargs = dict(num_edges=m.friction_edges, eps_c=m.eps_c, ball_radius=m.ball_radius,
+                      ball_mass=m.ball_mass, ee_radius=m.ee_radius, ee_mass=m.ee_mass,
+                      mu=m.friction)
+    lin = ball_rolling_linearizer(dt=m.planning_dt, **lin_kwargs)
+    lin_loop = ball_rolling_linearizer(dt=1.0 / s.c3.rate_hz, **lin_kwargs)
+    lcs_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start))
+    loop_sys = builder.AddSystem(AnitescuLcsSystem(lin_loop, s.c3.rate_hz,
+                                                   initial_state=x_start))
+    num_lambda = len(lin.lambda_names())
+
+    # 6. learner
+    stride = max(1, int(round(LEARNER_SAMPLE_HZ / s.learner.rate_hz)))
+    learner = builder.AddSystem(ResidualLearner(
+        learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,
+        enabled=s.learner.enabled, transition_dt=m.planning_dt, transition_stride=stride,
+        input_lag=1, tied_groups=_pair_groups(num_lambda)))
+
+    # 7. planner
+    planner = builder.AddSystem(BallRollingPlanner(
+        gait, c3_options(s, "roll", num_lambda), c3_options(s, "return", num_lambda),
+        num_lambda=num_lambda, rate_hz=s.c3.rate_hz,
+        ee_ball_rows=tuple(range(num_lambda // 2)), planning_dt=m.planning_dt,
+        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * 9.81))
+
+    u_port = planner.GetOutputPort("lcs_input")
+    for sys_ in (lcs_sys, loop_sys):
+        builder.Connect(lcs_state, sys_.GetInputPort("state"))
+        builder.Connect(u_port, sys_.GetInputPort("input"))
+    builder.Connect(lcs_state, learner.GetInputPort("state"))
+    # the learner sees the input that moved the EE, not the planned one
+    applied = builder.AddSystem(EeForceEstimator(mass=m.ee_mass, period=1.0 / LEARNER_SAMPLE_HZ))
+    builder.Connect(ee_state, applied.GetInputPort("ee.state"))
+    builder.Connect(applied.GetOutputPort("ee.applied_force"), learner.GetInputPort("input"))
+    builder.Connect(lcs_sys.GetOutputPort("lcs"), learner.GetInputPort("lcs"))
+    builder.Connect(lcs_state, planner.GetInputPort("state"))
+    builder.Connect(learner.GetOutputPort("lcs_with_residual"), planner.GetInputPort("lcs"))
+    builder.Connect(loop_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs_loop"))
+    builder.Connect(learner.GetOutputPort("r_comp"), planner.GetInputPort("r_comp"))
+
+    return BallRollingController(planner, learner, lcs_sys, lcs_state,
+                                 planner.GetOutputPort("ee.desired_state"),
+                                 planner.GetOutputPort("ee.feedforward_force"),
+                                 list(lin.lambda_names()))
+
+
 def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRollingDiagram:
     m = s.model
     R_true = true_radius(s)
@@ -203,57 +290,17 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     if scene.panda is not None:
         _set_panda_start(plant, scene.panda, ee_start, s)
 
-    # 2-4. robot, ball sensing, estimator
+    # 2-3. robot, ball sensing; 4-7. the controller
     robot = _add_robot(builder, plant, s, scene.panda, ee_instance)
     ball_sensor = _add_ball_sensing(builder, plant, scene_graph, s, scene.ball, start_xy)
-    estimator = builder.AddSystem(BallRollingEstimator(m.ball_radius))
-    builder.Connect(robot.GetOutputPort("ee.state"), estimator.GetInputPort("ee.state"))
-    builder.Connect(ball_sensor.GetOutputPort("ball.position"),
-                    estimator.GetInputPort("ball.position"))
-    builder.Connect(ball_sensor.GetOutputPort("ball.velocity"),
-                    estimator.GetInputPort("ball.velocity"))
-    lcs_state = estimator.GetOutputPort("lcs_state")
-
-    # 5. LCS at the planning dt and at the loop period
-    x_start[0:3] = ee_start
-    lin_kwargs = dict(num_edges=m.friction_edges, eps_c=m.eps_c, ball_radius=m.ball_radius,
-                      ball_mass=m.ball_mass, ee_radius=m.ee_radius, ee_mass=m.ee_mass,
-                      mu=m.friction)
-    lin = ball_rolling_linearizer(dt=m.planning_dt, **lin_kwargs)
-    lin_loop = ball_rolling_linearizer(dt=1.0 / s.c3.rate_hz, **lin_kwargs)
-    lcs_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start))
-    loop_sys = builder.AddSystem(AnitescuLcsSystem(lin_loop, s.c3.rate_hz,
-                                                   initial_state=x_start))
-    num_lambda = len(lin.lambda_names())
-
-    # 6. learner
-    stride = max(1, int(round(LEARNER_SAMPLE_HZ / s.learner.rate_hz)))
-    learner = builder.AddSystem(ResidualLearner(
-        learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,
-        enabled=s.learner.enabled, transition_dt=m.planning_dt, transition_stride=stride))
-
-    # 7. planner
-    planner = builder.AddSystem(BallRollingPlanner(
-        gait, c3_options(s, "roll", num_lambda), c3_options(s, "return", num_lambda),
-        num_lambda=num_lambda, rate_hz=s.c3.rate_hz,
-        ee_ball_rows=tuple(range(num_lambda // 2)), planning_dt=m.planning_dt,
-        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * 9.81))
-
-    u_port = planner.GetOutputPort("lcs_input")
-    for sys_ in (lcs_sys, loop_sys):
-        builder.Connect(lcs_state, sys_.GetInputPort("state"))
-        builder.Connect(u_port, sys_.GetInputPort("input"))
-    builder.Connect(lcs_state, learner.GetInputPort("state"))
-    builder.Connect(u_port, learner.GetInputPort("input"))
-    builder.Connect(lcs_sys.GetOutputPort("lcs"), learner.GetInputPort("lcs"))
-    builder.Connect(lcs_state, planner.GetInputPort("state"))
-    builder.Connect(learner.GetOutputPort("lcs_with_residual"), planner.GetInputPort("lcs"))
-    builder.Connect(loop_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs_loop"))
-    builder.Connect(learner.GetOutputPort("r_comp"), planner.GetInputPort("r_comp"))
-    builder.Connect(planner.GetOutputPort("ee.desired_state"),
-                    robot.GetInputPort("ee.desired_state"))
-    builder.Connect(planner.GetOutputPort("ee.feedforward_force"),
-                    robot.GetInputPort("ee.feedforward_force"))
+    ctrl = add_ball_rolling_controller(
+        builder, s, robot.GetOutputPort("ee.state"),
+        ball_sensor.GetOutputPort("ball.position"), ball_sensor.GetOutputPort("ball.velocity"),
+        x_start=x_start, ee_start=ee_start)
+    builder.Connect(ctrl.ee_desired_state, robot.GetInputPort("ee.desired_state"))
+    builder.Connect(ctrl.ee_feedforward_force, robot.GetInputPort("ee.feedforward_force"))
+    planner, learner, lcs_sys = ctrl.planner, ctrl.learner, ctrl.lcs_system
+    lcs_state = ctrl.lcs_state
 
     # 8. loggers, visualisation
     logs = {}
@@ -271,8 +318,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     diagram = builder.Build()
     diagram.set_name(f"ball_rolling[{s.name}]")
     return BallRollingDiagram(diagram, plant, scene_graph, planner, learner, lcs_sys, logs,
-                              R_true, np.r_[start_xy, R_true], ee_start,
-                              list(lin.lambda_names()))
+                              R_true, np.r_[start_xy, R_true], ee_start, ctrl.lambda_names)
 
 
 def _set_panda_start(plant, panda, ee_start, s):
@@ -285,5 +331,6 @@ def _set_panda_start(plant, panda, ee_start, s):
     plant.SetDefaultPositions(panda, q)
 
 
-__all__ = ["BallRollingDiagram", "build_ball_rolling_diagram", "c3_options",
+__all__ = ["BallRollingDiagram", "BallRollingController", "add_ball_rolling_controller",
+           "build_ball_rolling_diagram", "c3_options",
            "learner_options", "make_gait", "true_radius", "ball_start_xy"]

@@ -46,7 +46,7 @@ class Gait:
     roll_height: float = -0.005      # roll-phase EE target
     lift_height: float = 0.03        # lift and side-step height
     place_height: float = -0.005     # where the EE is put down (negative: pressing)
-    max_ee_speed: float = 1.0        # clamp on the commanded EE speed, m/s
+    max_ee_speed: float = 0.15       # clamp on the commanded EE speed, m/s (reference: 1)
     return_ee_weight: float = 1.0e4  # C3 weight on EE position in the return phase
     min_height: float = -0.005       # floor of the commanded EE height
     roll_lead: float = 1.0           # roll-phase EE target: 0 over the ball, 1 over its target

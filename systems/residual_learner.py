@@ -97,7 +97,11 @@ class ResidualLearner(LeafSystem):
     sampling rate; enabled, used when the enable port is unconnected; transition_dt (s,
     default 1/rate_hz) and transition_stride (see the module doc; ball rolling:
     rate_hz=200, transition_dt=0.1, transition_stride=10 -> one step at 20 Hz);
-    initial_residual (default zeros); input_lag (0 or 1, see the module doc). For a discrete plant stepping at the LCS dt, use
+    initial_residual (default zeros); input_lag (0 or 1, see the module doc);
+    tied_groups, lists of residual indices learned as one value (their gradients are
+    averaged before the Adam step; e.g. the friction-cone edges of one contact pair,
+    whose rows share one gap, so a gap offset moves them together). For a discrete
+    plant stepping at the LCS dt, use
     rate_hz = 1/dt: sampling such a plant faster than it steps would pair held states
     with inputs it never used.
     """
@@ -105,8 +109,9 @@ class ResidualLearner(LeafSystem):
     def __init__(self, options: LearnerOptions, num_states: int, num_inputs: int,
                  num_lambda: int, rate_hz: float = 20.0, enabled: bool = True,
                  transition_dt: float | None = None, transition_stride: int = 1,
-                 initial_residual=None, input_lag: int = 0):
+                 initial_residual=None, input_lag: int = 0, tied_groups=()):
         super().__init__()
+        self._groups = [list(map(int, g)) for g in tied_groups]
         if input_lag not in (0, 1):
             raise ValueError(f"ResidualLearner input_lag must be 0 or 1, got {input_lag}")
         self._lag = int(input_lag)
@@ -270,6 +275,9 @@ class ResidualLearner(LeafSystem):
                 vec[self._i_rej] += 1
             vec[self._i_loss] = loss
             if used and self._is_enabled(context):
+                grad = np.array(grad, float)
+                for g in self._groups:
+                    grad[g] = np.mean(grad[g])
                 delta, m1, m2, t = adam_update(grad, vec[self._i_m1], vec[self._i_m2],
                                                int(vec[self._i_t]), self._opts, self._mask)
                 vec[self._i_r] = r + delta

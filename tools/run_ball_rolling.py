@@ -19,6 +19,7 @@ from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
 
 CONTACT_TOL_M = 0.001   # true EE-ball distance counted as contact
+BAND = 0.5              # laps count only within +-BAND * radius of the circle
 
 
 def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
@@ -52,7 +53,12 @@ def rolling_metrics(logs, scenario, true_radius: float) -> dict:
     c = np.asarray(scenario.target.center, float)
     xy = ball[:, 4:6]
     angle = np.unwrap(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]))
-    progress = float(angle[-1] - angle[0])          # rad, counter-clockwise positive
+    radial = np.linalg.norm(xy - c, axis=1) - scenario.target.radius
+    # progress (rad, counter-clockwise positive) counts only while the ball is on the
+    # circle's band (within half the radius): cutting across the centre earns nothing
+    on_band = np.abs(radial) <= BAND * scenario.target.radius
+    steps = np.diff(angle) * (on_band[1:] & on_band[:-1])
+    progress = float(np.sum(steps))
     gap = (np.linalg.norm(ee[:, :3] - ball[:, 4:7], axis=1) - true_radius
            - scenario.model.ee_radius)
     touching = gap <= CONTACT_TOL_M
@@ -64,7 +70,6 @@ def rolling_metrics(logs, scenario, true_radius: float) -> dict:
     t_first = None if first is None else float(t[first])
     pushes = (int(np.sum(t[roll_starts] <= t_first)) if t_first is not None
               else int(len(roll_starts)))
-    radial = np.linalg.norm(xy - c, axis=1) - scenario.target.radius
     since = slice(first or 0, None)
     return {
         "laps": int(max(progress, 0.0) // (2 * np.pi)),
