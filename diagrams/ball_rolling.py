@@ -11,7 +11,7 @@ Recipe (world frame W = robot base frame, table top z = 0):
                      the planning dt and with the loop period
   6. learner         residual r_comp on the LCS offsets (200 Hz samples, 0.1 s
                      transitions, one Adam step per 10 samples = 20 Hz); its input is
-                     the EE force implied by the measured EE motion
+                     the tip force the impedance controller commanded
   7. planner         C3 on the LCS with residual + the roll/return gait -> EE command
   8. loggers, Meshcat (optional)
 """
@@ -23,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import VectorLogSink
+from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSink
 
 from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NAMES,
                                                               ball_rolling_linearizer,
@@ -35,13 +35,13 @@ from adaptive_c3.systems.ball_pose_sensor import BallPoseSensor
 from adaptive_c3.systems.ball_rolling_estimator import BallRollingEstimator
 from adaptive_c3.systems.ball_rolling_planner import BallRollingPlanner
 from adaptive_c3.systems.c3 import C3Options
-from adaptive_c3.systems.ee_force_estimator import EeForceEstimator
 from adaptive_c3.systems.residual_learner import ResidualLearner
 from adaptive_c3.systems.rolling_gait import CirclePath, GaitSettings, RollingGait
 from adaptive_c3.systems.violation_loss import LearnerOptions
 
 LEARNER_SAMPLE_HZ = 200.0
 LOG_PERIOD_S = 0.01
+GRAVITY = 9.81
 
 
 @dataclass
@@ -116,7 +116,7 @@ def learner_options(s: BallRollingScenario) -> LearnerOptions:
             qd[i] = 1e5
     return LearnerOptions(epsilon=cfg.epsilon, gamma=cfg.gamma,
                           learning_rate=cfg.learning_rate, batch_size=cfg.batch_size,
-                          Qd=qd, max_step=cfg.max_step)
+                          Qd=qd, max_step=cfg.max_step, lr_decay_steps=cfg.lr_decay_steps)
 
 
 def _add_robot(builder, plant, s, panda, ee_instance):
@@ -132,7 +132,8 @@ def _add_robot(builder, plant, s, panda, ee_instance):
                                rotational_stiffness=imp.rotational_stiffness,
                                rotational_damping=imp.rotational_damping,
                                nullspace_stiffness=imp.nullspace_stiffness,
-                               nullspace_damping=imp.nullspace_damping)
+                               nullspace_damping=imp.nullspace_damping,
+                               operational_space=imp.operational_space)
         ctrl = builder.AddSystem(ImpedanceController(gains, tilt_deg=imp.ee_tilt_deg,
                                                      q_null=imp.q_null))
         driver = builder.AddSystem(GravityCompensatedDriver())
@@ -198,12 +199,12 @@ class BallRollingController:
     lambda_names: list
 
 
-def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ball_position,
-                                ball_velocity, *, x_start=None,
+def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_force,
+                                ball_position, ball_velocity, *, x_start=None,
                                 ee_start=None) -> BallRollingController:
     """Adds steps 4-7 (estimator, LCS, learner, planner) reading the given output ports:
-    ee_state (6, EE tip position and velocity in W), ball_position (3) and
-    ball_velocity (3). The same function serves simulation and the LCM bridge."""
+    ee_state (6, EE tip position and velocity in W), ee_force (3, the tip force the
+    impedance controller commands, N in W), ball_position (3) and ball_velocity (3). The same function serves simulation and the LCM bridge."""
     m = s.model
     gait = make_gait(s)
     if x_start is None:
@@ -242,20 +243,23 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ball_
         gait, c3_options(s, "roll", num_lambda), c3_options(s, "return", num_lambda),
         num_lambda=num_lambda, rate_hz=s.c3.rate_hz,
         ee_ball_rows=tuple(range(num_lambda // 2)), planning_dt=m.planning_dt,
-        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * 9.81))
+        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY))
 
     u_port = planner.GetOutputPort("lcs_input")
     for sys_ in (lcs_sys, loop_sys):
         builder.Connect(lcs_state, sys_.GetInputPort("state"))
         builder.Connect(u_port, sys_.GetInputPort("input"))
     builder.Connect(lcs_state, learner.GetInputPort("state"))
-    # the learner sees the input that moved the EE, not the planned one
-    applied = builder.AddSystem(EeForceEstimator(mass=m.ee_mass, period=1.0 / LEARNER_SAMPLE_HZ))
-    builder.Connect(ee_state, applied.GetInputPort("ee.state"))
-    builder.Connect(applied.GetOutputPort("ee.applied_force"), learner.GetInputPort("input"))
+    # the learner sees the force the robot applied at the tip (not the planned one),
+    # plus the model EE's weight, which the robot's own gravity compensation carries
+    weight = builder.AddSystem(ConstantVectorSource([0.0, 0.0, m.ee_mass * GRAVITY]))
+    applied = builder.AddSystem(Adder(2, 3))
+    builder.Connect(ee_force, applied.get_input_port(0))
+    builder.Connect(weight.get_output_port(), applied.get_input_port(1))
+    builder.Connect(applied.get_output_port(), learner.GetInputPort("input"))
     builder.Connect(lcs_sys.GetOutputPort("lcs"), learner.GetInputPort("lcs"))
     builder.Connect(lcs_state, planner.GetInputPort("state"))
-    builder.Connect(learner.GetOutputPort("lcs_with_residual"), planner.GetInputPort("lcs"))
+    builder.Connect(lcs_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs"))
     builder.Connect(loop_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs_loop"))
     builder.Connect(learner.GetOutputPort("r_comp"), planner.GetInputPort("r_comp"))
 
@@ -276,7 +280,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     plant, scene_graph = AddMultibodyPlant(config, builder)
     start_xy = ball_start_xy(s)
     scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=m.ball_mass,
-                                   ball_position=tuple(start_xy), mu=m.friction,
+                                   ball_position=tuple(start_xy), mu=m.true_friction,
                                    with_arm=(s.robot == "panda"))
     gait = make_gait(s)
     x_start = default_state(tuple(start_xy), ball_radius=m.ball_radius,
@@ -285,7 +289,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     ee_instance = None
     if s.robot == "point_ee":
         ee_instance = add_point_ee(plant, radius=m.ee_radius, mass=s.point_ee_mass,
-                                   position=ee_start, mu=m.friction)
+                                   position=ee_start, mu=m.true_friction)
     plant.Finalize()
     if scene.panda is not None:
         _set_panda_start(plant, scene.panda, ee_start, s)
@@ -294,7 +298,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     robot = _add_robot(builder, plant, s, scene.panda, ee_instance)
     ball_sensor = _add_ball_sensing(builder, plant, scene_graph, s, scene.ball, start_xy)
     ctrl = add_ball_rolling_controller(
-        builder, s, robot.GetOutputPort("ee.state"),
+        builder, s, robot.GetOutputPort("ee.state"), robot.GetOutputPort("ee.commanded_force"),
         ball_sensor.GetOutputPort("ball.position"), ball_sensor.GetOutputPort("ball.velocity"),
         x_start=x_start, ee_start=ee_start)
     builder.Connect(ctrl.ee_desired_state, robot.GetInputPort("ee.desired_state"))
@@ -311,6 +315,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
         _log(builder, planner.GetOutputPort(name), name, logs)
     _log(builder, learner.GetOutputPort("r_comp"), "r_comp", logs)
     _log(builder, learner.GetOutputPort("loss"), "loss", logs)
+    _log(builder, robot.GetOutputPort("ee.commanded_force"), "ee_force", logs)
     if meshcat is not None:
         from pydrake.geometry import MeshcatVisualizer
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)

@@ -21,6 +21,7 @@ class RollingModel:
     ee_mass: float = 1.0             # kg, the controller model's EE (about the arm's
                                      # apparent mass at the tip; the reference uses 0.01)
     friction: float = 1.0            # mu of the model's contacts
+    true_friction: float = 1.0       # mu of the simulated truth (every geometry)
     friction_edges: int = 4          # n_e per contact
     eps_c: float = 0.01              # Anitescu regulariser
     planning_dt: float = 0.1         # LCS step, s
@@ -39,14 +40,14 @@ class Gait:
     """Roll phase (C3 plans with contact) then return phase (lift, move behind, lower).
     Heights are m above the model's EE-on-top-of-ball height (2 R_model + r_ee), which
     the learned EE-ball gap offset lowers (systems/rolling_gait.py)."""
-    roll_s: float = 1.0
+    roll_s: float = 0.6
     return_s: float = 0.5
     settle_s: float = 0.5            # initial move to the start pose before rolling
     back_distance: float = 0.02      # m behind the ball centre in the return phase
     roll_height: float = -0.005      # roll-phase EE target
     lift_height: float = 0.03        # lift and side-step height
     place_height: float = -0.005     # where the EE is put down (negative: pressing)
-    max_ee_speed: float = 0.15       # clamp on the commanded EE speed, m/s (reference: 1)
+    max_ee_speed: float = 0.25       # clamp on the commanded EE speed, m/s (reference: 1)
     return_ee_weight: float = 1.0e4  # C3 weight on EE position in the return phase
     min_height: float = -0.005       # floor of the commanded EE height
     roll_lead: float = 1.0           # roll-phase EE target: 0 over the ball, 1 over its target
@@ -63,6 +64,8 @@ class ImpedanceGains:
     ee_tilt_deg: float = 15.0
     q_null: List[float] = dc.field(default_factory=lambda: [0.0, 0.361, 0.0, -2.223, 0.0, 2.584, 0.0])
     feedforward: bool = True         # add the planned contact force
+    operational_space: bool = False  # weight the feedback by the task inertia (critically
+                                     # damped on the arm) instead of the reference's J'F
 
 
 @dc.dataclass
@@ -109,7 +112,8 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
     m = s.model
     need(m.object in ("ball", "orange", "lime"), f"model.object must be ball, orange or lime, got '{m.object}'")
     need(s.robot in ("panda", "point_ee"), f"robot must be panda or point_ee, got '{s.robot}'")
-    for key in ("ball_radius", "ball_mass", "ee_radius", "ee_mass", "friction", "eps_c", "planning_dt"):
+    for key in ("ball_radius", "ball_mass", "ee_radius", "ee_mass", "friction", "true_friction",
+                "eps_c", "planning_dt"):
         positive(f"model.{key}", getattr(m, key))
     need(math.isfinite(m.radius_error) and abs(m.radius_error) < 0.5 * m.ball_radius,
          f"model.radius_error must be smaller than half the radius, got {m.radius_error}")

@@ -136,6 +136,11 @@ def parse_override(text: str):
         parsed = yaml.safe_load(value)
     except yaml.YAMLError:
         raise ScenarioError(f"--set {key}: value '{value}' is not valid YAML")
+    if isinstance(parsed, str):   # YAML 1.1 reads '2e-4' as text; a number is meant
+        try:
+            parsed = float(parsed) if parsed.lower() not in ("nan", "inf", "-inf") else parsed
+        except ValueError:
+            pass
     return key.strip().split("."), parsed
 
 

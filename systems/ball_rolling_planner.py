@@ -14,7 +14,7 @@ the same tick) it
 
 Input ports (world frame W, SI units):
   state     (19)       estimated state, models/ball_rolling_controller_model order.
-  lcs       abstract   Lcs with the residual (planning dt).
+  lcs       abstract   Lcs θ* without residual (planning dt); the planner adds r_comp.
   lcs_loop  abstract   Lcs without residual, dt = loop period.
   r_comp    (m)        the learned residual (m/s at the planning dt); optional (0).
 Output ports:
@@ -138,7 +138,8 @@ class BallRollingPlanner(LeafSystem):
         warm = prev if (prev is not None and prev[0] == solver) else None
         t0 = time.perf_counter()
         try:
-            sol = solver.solve(lcs, x, target, warm=warm[1] if warm else None)
+            sol = solver.solve(lcs.with_residual(r), x, target,
+                               warm=warm[1] if warm else None)
             loop = lcs_loop.with_residual(r * (self._dt_plan / lcs_loop.dt))
             x_next, _ = loop.step(x, sol.u0)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):

@@ -19,6 +19,9 @@ Ports (world frame W = robot base frame, SI units):
                                      non-finite
   output "ee.state"             (6)  measured tip position (m) and velocity (m/s) in W
                                      (depends on "panda.state" only)
+  output "ee.commanded_force"   (3)  the translational tip force the law commands (N, W):
+                                     K (p_des - p) + D (v_des - v) + feed-forward, before
+                                     torque limits; zero on non-finite input
 Gains: ImpedanceGains (reference values by default; the law is the reference's plain
 J' F, see impedance_law.py for the operational_space option and why: with the Panda's
 reflected motor inertia the default gains are under-damped along x, ~0.25).
@@ -89,6 +92,7 @@ class ImpedanceController(LeafSystem):
         self.DeclareVectorOutputPort(
             "ee.state", 6, self._calc_ee_state,
             prerequisites_of_calc={self._state.ticket()})
+        self.DeclareVectorOutputPort("ee.commanded_force", 3, self._calc_force)
 
     @property
     def desired_rotation(self) -> np.ndarray:
@@ -120,6 +124,22 @@ class ImpedanceController(LeafSystem):
                                v_des=des[3:], R_des=R_des, f_ff=f_ff,
                                q_null=self._q_null, gains=self._gains, coriolis=cor)
         output.SetFromVector(tau)
+
+    def _calc_force(self, context, output):
+        x = self._state.Eval(context)
+        des = self._desired.Eval(context)
+        f_ff = self._ff.Eval(context) if self._ff.HasValue(context) else np.zeros(3)
+        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(des))
+                and np.all(np.isfinite(f_ff))):
+            output.SetFromVector(np.zeros(3))
+            return
+        arm = self._arm
+        arm.set_state(x[:NQ], x[NQ:])
+        p, _ = arm.tip_pose()
+        v = (arm.tip_jacobian() @ x[NQ:])[3:]
+        g = self._gains
+        output.SetFromVector(g.translational_stiffness * (des[:3] - p)
+                             + g.translational_damping * (des[3:] - v) + f_ff)
 
     def _calc_ee_state(self, context, output):
         x = self._state.Eval(context)

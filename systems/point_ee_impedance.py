@@ -10,6 +10,7 @@ Ports (world frame W; m, m/s, N):
   input  ee.feedforward_force  (3) optional, zero if unconnected
   output point_ee.actuation    (3) joint forces; zero if any input is non-finite
   output ee.state              (6) the measured EE state (same as the input)
+  output ee.commanded_force    (3) the actuation without the weight compensation
 """
 from __future__ import annotations
 
@@ -29,6 +30,13 @@ class PointEeImpedance(LeafSystem):
         self.DeclareVectorOutputPort("ee.state", 6,
                                      lambda c, o: o.SetFromVector(self._x.Eval(c)),
                                      prerequisites_of_calc={self._x.ticket()})
+        self.DeclareVectorOutputPort("ee.commanded_force", 3, self._calc_force)
+
+    def _calc_force(self, context, out):
+        f = self.get_output_port(0).Eval(context).copy()
+        if np.any(f):
+            f[2] -= self._mg
+        out.SetFromVector(f)
 
     def _calc(self, context, out):
         x, des = self._x.Eval(context), self._des.Eval(context)

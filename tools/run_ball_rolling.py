@@ -71,8 +71,13 @@ def rolling_metrics(logs, scenario, true_radius: float) -> dict:
     pushes = (int(np.sum(t[roll_starts] <= t_first)) if t_first is not None
               else int(len(roll_starts)))
     since = slice(first or 0, None)
+    laps = int(max(progress, 0.0) // (2 * np.pi))
     return {
-        "laps": int(max(progress, 0.0) // (2 * np.pi)),
+        "laps": laps,
+        # the paper's success criteria (Section VII-C)
+        "initiated": bool(progress >= 0.5 * np.pi),
+        "one_circle": laps >= 1,
+        "four_circles": laps >= 4,
         "circle_progress": progress / (2 * np.pi),
         "first_contact_s": t_first,
         "pushes_before_contact": pushes,
@@ -122,7 +127,8 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
     save_recording(out / "log.npz", Recording(
         t=t, x=x, u=u, state_names=list(STATE_NAMES), input_names=list(INPUT_NAMES),
         scenario=scenario_text,
-        extras={"r_comp": r, "loss": loss[:, 0], "ball_true": ball, "ee_true": ee,
+        extras={"ee_force": logs["ee_force"][1], "ee_desired": logs["ee.desired_state"][1],
+                "r_comp": r, "loss": loss[:, 0], "ball_true": ball, "ee_true": ee,
                 "phase": phase[:, 0]}))
     summary["plots"] = [p.name for p in plot_ball_rolling(out, logs, handles, scenario,
                                                           summary)]
