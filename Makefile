@@ -2,7 +2,7 @@
 PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
-DEFAULT_SCENARIO ?= scenarios/cartpole_softwalls.yaml
+DEFAULT_SCENARIO ?= scenarios/ball_rolling.yaml
 
 .PHONY: install run test test-slow bench clean
 

@@ -17,6 +17,7 @@ Recipe (world frame W = robot base frame, table top z = 0):
 """
 from __future__ import annotations
 
+import dataclasses as dc
 import math
 from dataclasses import dataclass
 
@@ -269,7 +270,20 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
                                  list(lin.lambda_names()))
 
 
+def controller_prior(s: BallRollingScenario) -> BallRollingScenario:
+    """The scenario as the controller sees it. For a fruit the prior is a sphere of the
+    kind's nominal radius and mass (models.fruit.nominal_sphere); radius_error and the
+    model ball's size do not apply."""
+    if s.model.object == "ball":
+        return s
+    from adaptive_c3.models.fruit import nominal_sphere
+    radius, mass = nominal_sphere(s.model.object)
+    return dc.replace(s, model=dc.replace(s.model, ball_radius=radius, ball_mass=mass,
+                                          radius_error=0.0))
+
+
 def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRollingDiagram:
+    s = controller_prior(s)
     m = s.model
     R_true = true_radius(s)
     builder = DiagramBuilder()
@@ -279,9 +293,13 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
                                   discrete_contact_approximation="sap")
     plant, scene_graph = AddMultibodyPlant(config, builder)
     start_xy = ball_start_xy(s)
+    fruit = None
+    if m.object != "ball":   # a lumpy fruit drawn from the seed; the prior stays a sphere
+        from adaptive_c3.models.fruit import sample_fruit
+        fruit = sample_fruit(m.object, s.seed)
     scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=m.ball_mass,
                                    ball_position=tuple(start_xy), mu=m.true_friction,
-                                   with_arm=(s.robot == "panda"))
+                                   with_arm=(s.robot == "panda"), fruit=fruit)
     gait = make_gait(s)
     x_start = default_state(tuple(start_xy), ball_radius=m.ball_radius,
                             ee_radius=m.ee_radius)
@@ -291,6 +309,9 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
         ee_instance = add_point_ee(plant, radius=m.ee_radius, mass=s.point_ee_mass,
                                    position=ee_start, mu=m.true_friction)
     plant.Finalize()
+    if fruit is not None:
+        from adaptive_c3.models.fruit import make_rigid_hydroelastic
+        make_rigid_hydroelastic(plant, scene_graph)
     if scene.panda is not None:
         _set_panda_start(plant, scene.panda, ee_start, s)
 
@@ -323,7 +344,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     diagram = builder.Build()
     diagram.set_name(f"ball_rolling[{s.name}]")
     return BallRollingDiagram(diagram, plant, scene_graph, planner, learner, lcs_sys, logs,
-                              R_true, np.r_[start_xy, R_true], ee_start, ctrl.lambda_names)
+                              scene.ball_radius, np.r_[start_xy, scene.ball_radius], ee_start, ctrl.lambda_names)
 
 
 def _set_panda_start(plant, panda, ee_start, s):

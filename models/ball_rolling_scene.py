@@ -94,16 +94,24 @@ def add_ball_rolling_scene(plant: MultibodyPlant, *, ball_radius: float = BALL_R
                            ball_mass: float = BALL_MASS, ball_color=BALL_COLOR,
                            ball_position=(0.65, 0.0), mu: float = 1.0,
                            table_top_z: float = TABLE_TOP_Z,
-                           with_arm: bool = True) -> BallRollingScene:
+                           with_arm: bool = True, fruit=None) -> BallRollingScene:
     """Adds arm (welded at the origin), table (top at table_top_z) and a free ball.
 
     The ball's default pose is at rest on the table at (ball_position[0],
     ball_position[1], table_top_z + ball_radius). `mu` is the Coulomb friction of
     every geometry added here (Drake combines a pair's coefficients). with_arm=False
-    gives the camera/detector test scene (table + ball only). Call before Finalize().
+    gives the camera/detector test scene (table + ball only). fruit: a FruitSpec
+    (models/fruit.py) put in place of the ball, in a model instance also named "ball"
+    (then call models.fruit.make_rigid_hydroelastic after Finalize, so the compliant
+    fruit meets the table with hydroelastic contact). Call before Finalize().
     """
     panda = add_panda(plant) if with_arm else None
     add_table(plant, top_z=table_top_z, mu=mu)
+    if fruit is not None:   # a models.fruit.FruitSpec instead of the ball
+        from adaptive_c3.models.fruit import add_fruit
+        body = add_fruit(plant, fruit, name="ball", position=ball_position, mu=mu,
+                         table_top_z=table_top_z)
+        return BallRollingScene(panda, body.model_instance(), fruit.radius, table_top_z)
     ball = add_ball(plant, radius=ball_radius, mass=ball_mass, color=ball_color, mu=mu)
     body = plant.GetBodyByName("ball", ball)
     plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(

@@ -114,6 +114,15 @@ class FruitSpec:
         return self.mass / (4.0 / 3.0 * np.pi * self.radius ** 3)
 
 
+def nominal_sphere(kind: str) -> tuple[float, float]:
+    """(radius m, mass kg) of the sphere the controller assumes for a fruit kind: the
+    middle of the kind's ranges (the paper's prior is a sphere of the fruit's size)."""
+    if kind not in _RANGES:
+        raise ValueError(f"unknown fruit kind {kind!r}; expected one of {FRUIT_KINDS}")
+    r = _RANGES[kind]
+    return float(np.mean(r["radius"])), float(np.mean(r["mass"]))
+
+
 def sample_fruit(kind: str, seed: int) -> FruitSpec:
     """Draws one fruit of `kind` ('orange' | 'lime') reproducibly from `seed`."""
     if kind not in _RANGES:

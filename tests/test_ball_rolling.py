@@ -128,3 +128,20 @@ def test_scenario_loads_and_rejects_bad_gait():
     from adaptive_c3.scenarios.schema import ScenarioError
     with pytest.raises(ScenarioError, match="gait.roll_s"):
         load_scenario(SCENARIO, ["gait.roll_s=-1"])
+
+
+def test_fruit_trial_uses_a_sphere_prior_of_the_fruit_size(tmp_path):
+    from adaptive_c3.models.fruit import nominal_sphere
+    s = _run(tmp_path, "model.object=lime", "seed=4", "sim_duration_s=3")
+    assert s["object"] == "lime"
+    assert s["model_radius_m"] == pytest.approx(nominal_sphere("lime")[0])
+    assert s["first_contact_s"] is not None      # the EE reaches the lime
+
+
+def test_shipped_sweeps_plan_their_cells():
+    from adaptive_c3.tools.sweep import load_sweep, plan_trials
+    fruit = plan_trials(load_sweep(SCENARIO_DIR / "fruit_sweep.yaml", ["trials=2"]))
+    assert len(fruit) == 3 * 2 * 2
+    assert len({t["cell_id"] for t in fruit}) == 6
+    errors = plan_trials(load_sweep(SCENARIO_DIR / "error_sweep.yaml"))
+    assert len(errors) == 14

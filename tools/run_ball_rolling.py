@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 from pydrake.systems.analysis import Simulator
 
-from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
+from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram, controller_prior
 from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
 from adaptive_c3.systems.rolling_gait import PHASES
 from adaptive_c3.tools.progress import Progress
@@ -110,7 +110,8 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         "real_time_factor": T / wall if wall > 0 else None,
         "final_state": x[-1].tolist(),
         "state_names": list(STATE_NAMES),
-        "model_radius_m": scenario.model.ball_radius,
+        "object": scenario.model.object,
+        "model_radius_m": controller_prior(scenario).model.ball_radius,
         "true_radius_m": handles.true_radius,
         "adaptation": bool(scenario.learner.enabled),
         **rolling_metrics(logs, scenario, handles.true_radius),
