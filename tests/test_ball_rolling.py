@@ -145,3 +145,16 @@ def test_shipped_sweeps_plan_their_cells():
     assert len({t["cell_id"] for t in fruit}) == 6
     errors = plan_trials(load_sweep(SCENARIO_DIR / "error_sweep.yaml"))
     assert len(errors) == 14
+
+
+def test_bench_loop_times_components_and_restores_them():
+    from adaptive_c3.systems.ball_rolling_planner import BallRollingPlanner
+    from adaptive_c3.tools.bench_loop import measure, timed_components
+    original = BallRollingPlanner._tick
+    row = measure(camera=False, sim_s=0.3)
+    assert BallRollingPlanner._tick is original
+    assert row["real_time_factor"] > 0
+    assert row["share"]["planner_c3"] > 0 and row["share"]["residual_learner"] >= 0
+    assert abs(sum(row["share"].values()) - 1.0) < 1e-9
+    with timed_components({}) as totals:
+        assert set(totals) >= {"planner_c3", "anitescu_lcs", "impedance"}
