@@ -120,23 +120,28 @@ def learner_options(s: BallRollingScenario) -> LearnerOptions:
                           Qd=qd, max_step=cfg.max_step, lr_decay_steps=cfg.lr_decay_steps)
 
 
+def make_impedance_controller(s: BallRollingScenario):
+    """The Panda's ImpedanceController with the scenario's gains (simulation and bridge)."""
+    from adaptive_c3.systems.impedance_controller import ImpedanceController
+    from adaptive_c3.systems.impedance_law import ImpedanceGains
+    imp = s.impedance
+    gains = ImpedanceGains(translational_stiffness=imp.translational_stiffness,
+                           translational_damping=imp.translational_damping,
+                           rotational_stiffness=imp.rotational_stiffness,
+                           rotational_damping=imp.rotational_damping,
+                           nullspace_stiffness=imp.nullspace_stiffness,
+                           nullspace_damping=imp.nullspace_damping,
+                           operational_space=imp.operational_space)
+    return ImpedanceController(gains, tilt_deg=imp.ee_tilt_deg, q_null=imp.q_null)
+
+
 def _add_robot(builder, plant, s, panda, ee_instance):
     """Impedance control of the EE; returns the system whose "ee.state" is measured and
     the (desired_state, feedforward) input ports."""
     imp = s.impedance
     if panda is not None:
-        from adaptive_c3.systems.impedance_controller import ImpedanceController
-        from adaptive_c3.systems.impedance_law import ImpedanceGains
         from adaptive_c3.systems.panda_sim_driver import GravityCompensatedDriver
-        gains = ImpedanceGains(translational_stiffness=imp.translational_stiffness,
-                               translational_damping=imp.translational_damping,
-                               rotational_stiffness=imp.rotational_stiffness,
-                               rotational_damping=imp.rotational_damping,
-                               nullspace_stiffness=imp.nullspace_stiffness,
-                               nullspace_damping=imp.nullspace_damping,
-                               operational_space=imp.operational_space)
-        ctrl = builder.AddSystem(ImpedanceController(gains, tilt_deg=imp.ee_tilt_deg,
-                                                     q_null=imp.q_null))
+        ctrl = builder.AddSystem(make_impedance_controller(s))
         driver = builder.AddSystem(GravityCompensatedDriver())
         state = plant.get_state_output_port(panda)
         builder.Connect(state, ctrl.GetInputPort("panda.state"))
@@ -359,4 +364,4 @@ def _set_panda_start(plant, panda, ee_start, s):
 
 __all__ = ["BallRollingDiagram", "BallRollingController", "add_ball_rolling_controller",
            "build_ball_rolling_diagram", "c3_options",
-           "learner_options", "make_gait", "true_radius", "ball_start_xy"]
+           "learner_options", "make_gait", "make_impedance_controller", "true_radius", "ball_start_xy"]

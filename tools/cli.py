@@ -123,10 +123,45 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--out", default=None)
     diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnose", "cmd_diagnose"))
 
-    hw = sub.add_parser("hardware", help="LCM bridge to a real Franka driver")
-    hw.add_argument("scenario")
-    hw.add_argument("--lcm-url", required=True)
+    hw = sub.add_parser(
+        "hardware", help="LCM bridge to a real Franka driver",
+        description="The controller side over LCM: subscribes PANDA_STATUS (lcmt_panda_status) "
+        "and BALL_ESTIMATE (lcmt_robot_state: ball_x, ball_y, ball_z, ball_vx, ball_vy, ball_vz), "
+        "publishes PANDA_COMMAND (lcmt_panda_command, torque without gravity) through a watchdog.")
+    hw.add_argument("scenario", help="ball_rolling scenario YAML (a path or a shipped name)")
+    hw.add_argument("--lcm-url", default=None,
+                    help="LCM URL, e.g. udpm://239.255.76.67:7667?ttl=0 (required unless --loopback)")
+    hw.add_argument("--duration", type=float, default=None, help="stop after S seconds (default: until Ctrl-C)")
+    hw.add_argument("--stale-ms", type=float, default=50.0, help="watchdog: status older than this -> zero torque")
+    hw.add_argument("--log", default=None, help="write all LCM traffic to this LCM log file")
+    hw.add_argument("--max-lag-ms", type=float, default=100.0,
+                    help="watchdog: zero torque while the controller runs more than this behind real time")
+    hw.add_argument("--period", type=float, default=1e-3, help="command (and watchdog) period, s")
+    hw.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
+    hw.add_argument("--loopback", action="store_true",
+                    help="run the bridge and the simulated driver in one process over memq://, "
+                    "in lock-step (a self-test; --duration defaults to the scenario's)")
     hw.set_defaults(func=_delegate("adaptive_c3.tools.hardware", "cmd_hardware"))
+
+    sd = sub.add_parser("sim-driver", help="the simulated robot + ball speaking only LCM (for `hardware`)",
+                        description="Runs the true plant (Panda, table, ball; SAP) in real time and "
+                        "speaks only LCM: publishes PANDA_STATUS and BALL_ESTIMATE, obeys PANDA_COMMAND.")
+    sd.add_argument("scenario")
+    sd.add_argument("--lcm-url", required=True)
+    sd.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
+    sd.add_argument("--status-period", type=float, default=1e-3, help="PANDA_STATUS period, s")
+    sd.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
+    sd.set_defaults(func=_delegate("adaptive_c3.tools.sim_driver", "cmd_sim_driver"))
+
+    rec = sub.add_parser("record", help="recordings from a rig")
+    rsub = rec.add_subparsers(dest="record_command", required=True)
+    conv = rsub.add_parser("convert", help="an LCM log (PANDA_STATUS, PANDA_COMMAND, BALL_ESTIMATE) -> a recording .npz")
+    conv.add_argument("log", help="LCM event log file")
+    conv.add_argument("out", help="output recording (.npz)")
+    conv.add_argument("--scenario", default=None, help="scenario YAML to store in the recording")
+    conv.add_argument("--dt", type=float, default=0.01,
+                      help="resample to this uniform step, s (0: every status message)")
+    conv.set_defaults(func=_delegate("adaptive_c3.tools.record_convert", "cmd_record_convert"))
 
     gm = sub.add_parser("gradient-map", help="the paper's Fig. 3 for the cart-pole")
     gm.add_argument("--out", default="runs/gradient_map")

@@ -88,12 +88,13 @@ def rolling_metrics(logs, scenario, true_radius: float) -> dict:
 
 
 def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = False) -> dict:
-    mc = None
-    if meshcat:
-        from pydrake.geometry import StartMeshcat
-        mc = StartMeshcat()
+    if meshcat:   # interactive: localhost, sliders + buttons (systems/meshcat_controls.py)
+        from adaptive_c3.systems.meshcat_controls import simulate_interactive, start_meshcat
+        mc = start_meshcat()
         print(f"Meshcat: {mc.web_url()}", flush=True)
-    handles, logs, wall = simulate_ball_rolling(scenario, meshcat=mc)
+        handles, logs, wall = simulate_interactive(scenario, mc)
+    else:
+        handles, logs, wall = simulate_ball_rolling(scenario)
     t, x = logs["lcs_state"]
     _, u = logs["lcs_input"]
     _, r = logs["r_comp"]

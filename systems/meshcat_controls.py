@@ -1,0 +1,186 @@
+"""Interactive Meshcat controls for the ball-rolling run (`adaptive-c3 run ... --meshcat`).
+
+`MeshcatControls` puts on Drake's Meshcat page (served on localhost by `start_meshcat`):
+  sliders  "model error [mm]"          the injected ball-radius error (model - true);
+                                       a structural change: applied by "Restart"
+           "learning rate"             the residual learner's Adam step (live)
+           "target radius [m]"         the target circle's radius (live)
+           "target lead [deg]"         how far the target leads the ball along the
+                                       circle - the rolling speed (live)
+           "learned offset [mm]"       display only: the learned EE-ball gap offset
+                                       (mean r_comp of the EE-ball rows x planning dt)
+  buttons  "Adaptation on/off"         toggles learning (the learner's enable port)
+           "Restart"                   rebuilds the run with the slider's model error
+           "Stop"                      ends the run (results are written as usual)
+and draws the current C3 plan (EE and ball positions over the horizon) as two lines.
+
+It works between simulator steps on a built BallRollingDiagram (it does not add
+systems): `apply()` copies the sliders into the learner / gait, `show()` draws.
+`simulate_interactive` is the run loop that uses it (real time by default); it returns
+what tools/run_ball_rolling.simulate_ball_rolling returns.
+"""
+from __future__ import annotations
+
+import dataclasses
+import time
+
+import numpy as np
+
+ERROR_SLIDER = "model error [mm]"
+LR_SLIDER = "learning rate"
+RADIUS_SLIDER = "target radius [m]"
+LEAD_SLIDER = "target lead [deg]"
+OFFSET_DISPLAY = "learned offset [mm]"
+ADAPT_BUTTON = "Adaptation on/off"
+RESTART_BUTTON = "Restart"
+STOP_BUTTON = "Stop"
+
+
+def start_meshcat(port: int | None = None):
+    """A Meshcat server bound to localhost (DESIGN.md: not all interfaces)."""
+    from pydrake.geometry import Meshcat, MeshcatParams
+    return Meshcat(MeshcatParams(host="localhost", port=port))
+
+
+class MeshcatControls:
+    def __init__(self, meshcat, scenario):
+        self.meshcat = meshcat
+        self.scenario = scenario
+        m, t, lr = scenario.model, scenario.target, scenario.learner.learning_rate
+        lim = 0.45 * m.ball_radius * 1e3
+        meshcat.AddSlider(ERROR_SLIDER, -round(lim, 1), round(lim, 1), 0.5, m.radius_error * 1e3)
+        meshcat.AddSlider(LR_SLIDER, 0.0, max(0.02, 2 * lr), 1e-4, lr)
+        meshcat.AddSlider(RADIUS_SLIDER, 0.05, 0.15, 0.005, t.radius)
+        meshcat.AddSlider(LEAD_SLIDER, 5.0, 45.0, 1.0, t.lead_deg)
+        meshcat.AddSlider(OFFSET_DISPLAY, -20.0, 20.0, 0.01, 0.0)
+        for b in (ADAPT_BUTTON, RESTART_BUTTON, STOP_BUTTON):
+            meshcat.AddButton(b)
+        self._clicks = {b: 0 for b in (ADAPT_BUTTON, RESTART_BUTTON, STOP_BUTTON)}
+        self.adaptation = bool(scenario.learner.enabled)
+        self.handles = None
+        self._ctx = None
+
+    # ----------------------------------------------------------------- state
+    def _new_clicks(self, button) -> int:
+        n = self.meshcat.GetButtonClicks(button)
+        new, self._clicks[button] = n - self._clicks[button], n
+        return new
+
+    def model_error_m(self) -> float:
+        return 1e-3 * self.meshcat.GetSliderValue(ERROR_SLIDER)
+
+    def scenario_for_restart(self):
+        s = self.scenario
+        model = dataclasses.replace(s.model, radius_error=self.model_error_m())
+        target = dataclasses.replace(s.target, radius=self.meshcat.GetSliderValue(RADIUS_SLIDER),
+                                     lead_deg=self.meshcat.GetSliderValue(LEAD_SLIDER))
+        learner = dataclasses.replace(s.learner, enabled=self.adaptation,
+                                      learning_rate=self.meshcat.GetSliderValue(LR_SLIDER))
+        return dataclasses.replace(s, model=model, target=target, learner=learner)
+
+    def attach(self, handles, root_context) -> None:
+        """Control this diagram (a BallRollingDiagram) in this root context."""
+        self.handles, self._ctx = handles, root_context
+        self._learner_ctx = handles.learner.GetMyMutableContextFromRoot(root_context)
+        self._planner_ctx = handles.planner.GetMyContextFromRoot(root_context)
+        self._set_enable()
+
+    def _set_enable(self):
+        port = self.handles.learner.GetInputPort("enable")
+        port.FixValue(self._learner_ctx, [1.0 if self.adaptation else 0.0])
+
+    # ----------------------------------------------------------------- polling
+    def apply(self) -> dict:
+        """Copy sliders / buttons into the running diagram; returns the requests."""
+        h = self.handles
+        if self._new_clicks(ADAPT_BUTTON) % 2:
+            self.adaptation = not self.adaptation
+            self._set_enable()
+        lr = float(self.meshcat.GetSliderValue(LR_SLIDER))
+        learner = h.learner
+        if lr != learner.options.learning_rate:
+            # the learner reads its options at every Adam step
+            learner._opts = dataclasses.replace(learner.options, learning_rate=lr)
+        gait = h.planner._gait
+        radius = float(self.meshcat.GetSliderValue(RADIUS_SLIDER))
+        lead = float(self.meshcat.GetSliderValue(LEAD_SLIDER))
+        if (radius, lead) != (gait.path.radius, gait.path.lead_deg):
+            gait.path = dataclasses.replace(gait.path, radius=radius, lead_deg=lead)
+        return {"stop": self._new_clicks(STOP_BUTTON) > 0,
+                "restart": self._new_clicks(RESTART_BUTTON) > 0,
+                "adaptation": self.adaptation, "learning_rate": lr,
+                "target_radius": radius, "target_lead_deg": lead}
+
+    def show(self) -> None:
+        """Draw the plan and the learned offset."""
+        from pydrake.geometry import Rgba
+        h = self.handles
+        sol = h.planner.solution(self._planner_ctx)
+        if sol is not None and np.all(np.isfinite(sol.x_plan)):
+            self.meshcat.SetLine("plan/ee", np.asarray(sol.x_plan[:, 0:3].T, order="F"),
+                                 3.0, Rgba(0.1, 0.4, 1.0, 1.0))
+            self.meshcat.SetLine("plan/ball", np.asarray(sol.x_plan[:, 7:10].T, order="F"),
+                                 3.0, Rgba(1.0, 0.5, 0.0, 1.0))
+        c, R = np.asarray(h.planner._gait.path.center, float), h.planner._gait.path.radius
+        a = np.linspace(0, 2 * np.pi, 73)
+        circle = np.vstack([c[0] + R * np.cos(a), c[1] + R * np.sin(a), np.full(a.size, 0.001)])
+        self.meshcat.SetLine("target_circle", np.asarray(circle, order="F"), 1.0,
+                             Rgba(0.0, 0.0, 0.0, 1.0))
+        r = np.asarray(h.learner.residual(h.learner.GetMyContextFromRoot(self._ctx)), float)
+        half = r.size // 2
+        offset_mm = float(np.mean(r[:half]) * self.scenario.model.planning_dt * 1e3)
+        if np.isfinite(offset_mm):
+            self.meshcat.SetSliderValue(OFFSET_DISPLAY, float(np.clip(offset_mm, -20, 20)))
+
+    def close(self) -> None:
+        for name in (ERROR_SLIDER, LR_SLIDER, RADIUS_SLIDER, LEAD_SLIDER, OFFSET_DISPLAY):
+            self.meshcat.DeleteSlider(name)
+        for b in self._clicks:
+            self.meshcat.DeleteButton(b)
+
+
+def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate: float = 1.0,
+                         chunk_s: float = 0.05, controls: MeshcatControls | None = None):
+    """The interactive run loop: simulate in chunks, polling the controls between them;
+    "Restart" rebuilds with the sliders' settings, "Stop" ends. Returns (handles, logs,
+    wall seconds) of the last episode, like simulate_ball_rolling."""
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
+    controls = controls or MeshcatControls(meshcat, scenario)
+    s = scenario
+    while True:
+        meshcat.Delete()
+        handles = build_ball_rolling_diagram(s, meshcat=meshcat)
+        sim = Simulator(handles.diagram)
+        if realtime_rate:
+            sim.set_target_realtime_rate(realtime_rate)
+        context = sim.get_mutable_context()
+        sim.Initialize()
+        controls.attach(handles, context)
+        start = time.perf_counter()
+        t, T, restart = 0.0, s.sim_duration_s, False
+        while t < T - 1e-12:
+            t = min(t + chunk_s, T)
+            sim.AdvanceTo(t)
+            req = controls.apply()
+            controls.show()
+            if req["stop"]:
+                break
+            if req["restart"]:
+                restart = True
+                break
+        wall = time.perf_counter() - start
+        if not restart:
+            break
+        s = controls.scenario_for_restart()
+        if progress:
+            print(f"restart: model error {1e3 * s.model.radius_error:.1f} mm", flush=True)
+    logs = {}
+    for name, sink in handles.logs.items():
+        log = sink.FindLog(context)
+        logs[name] = (log.sample_times().copy(), log.data().T.copy())
+    return handles, logs, wall
+
+
+__all__ = ["MeshcatControls", "simulate_interactive", "start_meshcat"]
