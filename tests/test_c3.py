@@ -172,7 +172,7 @@ def test_solution_fields_and_residuals():
     assert sol.u0.shape == (1,) and sol.x_plan.shape == (N + 1, 4)
     assert sol.lam_plan.shape == (N, 2) and sol.u_plan.shape == (N, 1)
     assert sol.delta.shape == (N, 4 + 2 + 1 + 2)          # C3+ carries eta
-    assert sol.iterations == 10 and sol.solve_time_s > 0
+    assert sol.iterations == 10
     assert np.isfinite(sol.primal_residual) and np.isfinite(sol.dual_residual)
     np.testing.assert_allclose(sol.x_plan[0], X0S[0])
     np.testing.assert_allclose(sol.u0, sol.u_plan[0])

@@ -5,8 +5,13 @@ the model leaves out (from the library in `mismatch_effects`), fits it with a 95
 interval, writes a patched scenario and shows the held-out fit improve:
 DIR/report.json, DIR/report.html (+ PNG plots), DIR/patched_scenario.yaml.
 
+Tasks: cartpole (a constant LCS) and ball_rolling (the controller model's Anitescu LCS
+linearised at every recording sample, tools/mismatch_effects_ball.py; the recording
+must be sampled at 100 Hz).
+
 Patched scenarios: where an effect maps onto a scenario key it sets the key
-(contact_offset -> model.wall_offset_error, contact_stiffness -> model.wall_stiffness);
+(contact_offset -> model.wall_offset_error, contact_stiffness -> model.wall_stiffness;
+ball rolling: contact_offset[ee_ball] -> model.ee_radius, mass_scale -> model.ball_mass);
 every other effect goes into an `effects:` list. The scenario schema does not know that
 list, so `run` refuses such a file; `diagnose` reads it (the listed effects become part
 of the model it checks), so re-diagnosing with the patched scenario should say `none`.
@@ -80,7 +85,16 @@ def model_spec(scenario):
     task = getattr(scenario, "task", "cartpole")
     if task == "cartpole":
         return cartpole_spec(scenario)
-    raise _user_error(f"diagnose supports the cart-pole task in this build, not '{task}'")
+    if task == "ball_rolling":
+        from adaptive_c3.tools.mismatch_effects_ball import ball_spec
+        return ball_spec(scenario)
+    raise _user_error(f"diagnose supports the cartpole and ball_rolling tasks, not '{task}'")
+
+
+def fit_weight(spec) -> np.ndarray:
+    """[n] 1 for the states fitted and scored, 0 for the ignored ones (e.g. quaternions)."""
+    w = getattr(spec, "fit_weight", None)
+    return np.ones(len(spec.state_names)) if w is None else np.asarray(w, float)
 
 
 # ------------------------------------------------------------------ checks
@@ -132,14 +146,15 @@ def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
     for k, P in models.items():
         Wk = W.take(keep & (fold == k))
         if len(Wk):
-            X, _ = rollout(P, Wk.X0, Wk.U, Wk.Xt.shape[1], LAG)
+            X, _ = rollout(P, Wk.X0, Wk.U, Wk.Xt.shape[1], LAG, Wk.row)
             errs.append(X - Wk.Xt)
     if not errs:
         return None
     err = np.concatenate(errs, 0)
     fl = floor[:err.shape[1]]
     rmse = np.sqrt(np.mean(err ** 2, axis=(0, 1)))
-    norm = float(np.sqrt(np.mean((err / fl) ** 2)))
+    scored = fit_weight(spec) > 0
+    norm = float(np.sqrt(np.mean((err / fl)[..., scored] ** 2)))
     return dict(rmse={n: float(v) for n, v in zip(spec.state_names, rmse)},
                 normalised_rms=norm, excess_over_noise=float(np.sqrt(max(norm ** 2 - 1.0, 0.0))),
                 windows=int(len(err)))
@@ -165,6 +180,8 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     from adaptive_c3.tools.progress import Progress
     start = time.perf_counter()
     base = list(base)
+    if hasattr(spec, "prepare"):          # time-varying models linearise along the recording
+        spec.prepare(rec)
     P0 = patch(spec, base)
     W1, WH = make_windows(rec, 1), make_windows(rec, horizon)
     sigma = estimate_noise(P0, W1)
@@ -172,7 +189,9 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
     foldH, split_note = fold_ids(rec, WH)
     fold1, _ = fold_ids(rec, W1)
-    prob = Problem(spec, base, WH, foldH, 1.0 / floor)
+    stride = int(getattr(spec, "window_stride", 1))    # costly models: fewer fit windows
+    keep = np.arange(len(WH)) % stride == 0
+    prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
     cands, not_applicable = applicable_candidates(spec)
@@ -219,6 +238,12 @@ def patched_scenario_text(scenario_text: str, spec, base, chosen) -> tuple[str, 
             elif c.name == "contact_stiffness" and spec.name == "cartpole":
                 model["wall_stiffness"] = float(p[0])
                 notes.append("contact_stiffness[walls] -> model.wall_stiffness")
+            elif c.name == "contact_offset" and c.target == "ee_ball":
+                model["ee_radius"] = float(spec.params.ee_radius - p[0])   # gap + offset
+                notes.append("contact_offset[ee_ball] -> model.ee_radius")
+            elif c.name == "mass_scale" and spec.name == "ball_rolling":
+                model["ball_mass"] = float(spec.params.ball_mass * p[0])
+                notes.append("mass_scale[ball] -> model.ball_mass")
             else:
                 effects.append((c, p))
                 intervals[c] = lo_hi

@@ -180,8 +180,12 @@ class Candidate:
 def applicable_candidates(spec: SystemSpec) -> tuple[list, dict]:
     """(candidates, {effect name: reason it does not apply})."""
     cands, skipped = [], dict(spec.not_applicable)
+    targets = getattr(spec, "effect_targets", None) or {}
     for name, d in EFFECTS.items():
         if name in skipped:
+            continue
+        if name in targets:
+            cands += [Candidate(name, t) for t in targets[name]]
             continue
         if d.kind == "coord":
             cands += [Candidate(name, c) for c in spec.coord_names]
@@ -235,6 +239,9 @@ class Patched:
 
 def patch(spec: SystemSpec, effects) -> Patched:
     """Apply [(Candidate, params), ...] to the spec's LCS."""
+    custom = getattr(spec, "custom_patch", None)
+    if custom is not None:            # e.g. ball rolling: a time-varying LCS per sample
+        return custom(list(effects))
     lcs, minv = spec.lcs, spec.minv
     masses = {}
     for c, p in effects:                  # repeated effects compose (scenario + candidate)
@@ -309,8 +316,11 @@ def delayed_inputs(U: np.ndarray, lag: int, delay_steps: float, h: int) -> np.nd
     return (1 - a) * U[:, i0] + a * U[:, i1]
 
 
-def rollout(P: Patched, X0: np.ndarray, U: np.ndarray, horizon: int, lag: int):
-    """Open-loop rollouts of many windows: X [W, horizon, n] (x_1..x_H), lam [W, H, m]."""
+def rollout(P: Patched, X0: np.ndarray, U: np.ndarray, horizon: int, lag: int, rows=None):
+    """Open-loop rollouts of many windows: X [W, horizon, n] (x_1..x_H), lam [W, H, m].
+    rows: the recording row of each window's start (time-varying models need it)."""
+    if hasattr(P, "rollout"):
+        return P.rollout(X0, U, horizon, lag, rows)
     X = np.array(X0, float)
     xs, lams = [], []
     for h in range(horizon):
@@ -347,15 +357,15 @@ def apply_coulomb(P: Patched, X: np.ndarray) -> np.ndarray:
 
 
 def sensitivity_columns(spec: SystemSpec, cands, X: np.ndarray, U: np.ndarray, lag: int,
-                        eps_rel: float = 1e-3, base_effects=()) -> np.ndarray:
+                        eps_rel: float = 1e-3, base_effects=(), rows=None) -> np.ndarray:
     """d x_{k+1} / d theta at the nominal model for each 1-parameter candidate: [W, n, C]."""
     cols, base_effects = [], list(base_effects)
-    base = rollout(patch(spec, base_effects), X, U, 1, lag)[0][:, 0]
+    base = rollout(patch(spec, base_effects), X, U, 1, lag, rows)[0][:, 0]
     for cand in cands:
         lo, hi = cand.bounds(spec)
         step = eps_rel * max(float(hi[0] - lo[0]), 1e-6)
         p = cand.nominal(spec) + step
-        x1 = rollout(patch(spec, base_effects + [(cand, p)]), X, U, 1, lag)[0][:, 0]
+        x1 = rollout(patch(spec, base_effects + [(cand, p)]), X, U, 1, lag, rows)[0][:, 0]
         cols.append((x1 - base) / step)
     return np.stack(cols, -1)
 

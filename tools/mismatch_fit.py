@@ -87,7 +87,7 @@ class Problem:
     def residuals(self, effects, W: Windows) -> np.ndarray:
         """[W, H, n] normalised rollout residuals of the model with `effects` added."""
         P = patch(self.spec, self.base + list(effects))
-        X, _ = rollout(P, W.X0, W.U, self.horizon, LAG)
+        X, _ = rollout(P, W.X0, W.U, self.horizon, LAG, W.row)
         r = (X - W.Xt) * self.weight
         return np.where(np.isfinite(r), r, 1e6)
 
@@ -153,6 +153,9 @@ def fit_candidates(prob: Problem, cands, init=None, ci: bool = True, W=None) -> 
     if init is None:
         if len(cands) == 1 and cands[0].num_params(spec) == 1:
             grid = cands[0].definition().grid(spec, cands[0].target)
+            npts = getattr(spec, "grid_points", 0)
+            if npts and len(grid) > npts:       # costly models: a coarser grid
+                grid = grid[np.unique(np.linspace(0, len(grid) - 1, npts).round().astype(int))]
             costs = [np.sum(fun(np.array([g])) ** 2) for g in grid]
             init = np.array([grid[int(np.argmin(costs))]])
         else:
@@ -302,17 +305,21 @@ def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
     fit.score = _score(fit.test_ssr, n, fit.num_params, prob.horizon)
     fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
     fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
+    min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
     fit.significant = bool(fit.score < _score(ssr0, n, 0, prob.horizon) - SCORE_MARGIN
-                           and fit.reduction >= MIN_REDUCTION)
+                           and fit.reduction >= min_red)
     return fit
 
 
-def _choose(fits):
+def _choose(fits, equal_rel: float = 0.0):
     sig = [f for f in fits if f.significant]
     if not sig:
         return None
     best = min(sig, key=lambda f: f.score)
-    equal = [f for f in sig if f.score < best.score + SCORE_MARGIN]
+    # equally good: within SCORE_MARGIN, or (models with a structural floor, equal_rel > 0)
+    # within a relative held-out SSR margin of the best
+    equal = [f for f in sig if f.score < best.score + SCORE_MARGIN
+             or f.test_ssr <= best.test_ssr * (1.0 + equal_rel)]
     return min(equal, key=lambda f: (not f.physical, f.num_params, f.score))
 
 
@@ -333,7 +340,8 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True):
             progress.update(i + 1)
     eligible = list(fits)
     if pairs:
-        singles = sorted([f for f in fits if f.physical], key=lambda f: f.score)[:4]
+        singles = sorted([f for f in fits if f.physical],
+                         key=lambda f: f.score)[:getattr(prob.spec, "pair_singles", 4)]
         for a, b in combinations(singles, 2):
             if a.cands[0].name == b.cands[0].name == "actuator_delay":
                 continue
@@ -341,11 +349,12 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True):
             f = score_fit(prob, cv_fit(prob, [a.cands[0], b.cands[0]], init), none_eval)
             fits.append(f)
             # a pair must explain clearly more than either of its effects alone
-            if f.test_ssr < (1 - PAIR_REDUCTION) * min(a.test_ssr, b.test_ssr):
+            pair_red = getattr(prob.spec, "pair_reduction", PAIR_REDUCTION)
+            if f.test_ssr < (1 - pair_red) * min(a.test_ssr, b.test_ssr):
                 eligible.append(f)
             if progress:
                 progress.update(len(fits))
-    chosen = _choose(eligible)
+    chosen = _choose(eligible, getattr(prob.spec, "equal_reduction", 0.0))
     if chosen is not None:
         if not len(chosen.shift):
             widen_for_bias(prob, chosen)

@@ -70,7 +70,7 @@ def make_windows(rec, horizon: int) -> Windows:
 
 def one_step(P: Patched, W: Windows) -> tuple[np.ndarray, np.ndarray]:
     """(residual x_{k+1} - x_{k+1|k} [W, n], model lam [W, m])."""
-    X, lam = rollout(P, W.X0, W.U, 1, LAG)
+    X, lam = rollout(P, W.X0, W.U, 1, LAG, W.row)
     return W.Xt[:, 0] - X[:, 0], lam[:, 0]
 
 
@@ -100,6 +100,8 @@ def prediction_floor(P: Patched, sigma: np.ndarray, horizon: int) -> np.ndarray:
 
 def contact_states(P: Patched, W1: Windows, floor1: np.ndarray):
     """(model contact [W, m] bool, data contact [W, m] bool, inferred lam [W, m])."""
+    if hasattr(P, "contact_states"):         # models with their own contact structure
+        return P.contact_states(W1, floor1, LAG)
     _, lam_model = one_step(P, W1)
     u = W1.U[:, LAG]
     tau = P.external - P.viscous * W1.X0[:, P.v_idx]
@@ -129,7 +131,7 @@ def locate(rec, spec, P: Patched, W1: Windows, WH: Windows, floor: np.ndarray,
     """Mismatch windows and contact agreement. Returns (windows list, per-step dict)."""
     e1, _ = one_step(P, W1)
     z1 = e1 / floor[0]
-    XH, _ = rollout(P, WH.X0, WH.U, WH.Xt.shape[1], LAG)
+    XH, _ = rollout(P, WH.X0, WH.U, WH.Xt.shape[1], LAG, WH.row)
     zH_w = (WH.Xt[:, -1] - XH[:, -1]) / floor[-1]
     zH = np.zeros_like(z1)
     pos = {r: i for i, r in enumerate(W1.row)}

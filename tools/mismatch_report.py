@@ -105,12 +105,13 @@ def _plots(out: Path, rec, result) -> list:
     ep = max(eps, key=lambda e: steps["flag"][W1.episode == e].sum())
     sel = W1.episode == ep
     t = W1.t0[sel]
-    n = len(spec.state_names)
+    shown = list(getattr(spec, "plot_idx", ()) or range(len(spec.state_names)))
+    n = len(shown)
     fig, ax = plt.subplots(n + 2, 1, figsize=(10, 2.0 * (n + 2)), sharex=True)
     flag = steps["flag"][sel]
-    for i, name in enumerate(spec.state_names):
-        ax[i].plot(t, W1.X0[sel, i], "k.", ms=2, label="recording")
-        ax[i].set_ylabel(name)
+    for i, j in enumerate(shown):
+        ax[i].plot(t, W1.X0[sel, j], "k.", ms=2, label="recording")
+        ax[i].set_ylabel(spec.state_names[j])
         for a, b in _runs(flag):
             for k in range(n + 2):
                 ax[k].axvspan(t[a], t[b], color="orange", alpha=0.15, lw=0)
@@ -143,12 +144,12 @@ def _plots(out: Path, rec, result) -> list:
             for tag, P, style in (("original model", result["P0"], "r--"),
                                   ("patched model (fitted without this part)",
                                    result["P1_folds"][fold], "b-")):
-                X, _ = rollout(P, x0[None], U[None], length, LAG)
-                for i in range(n):
-                    ax[i, j].plot(tt[1:], X[0, :, i], style, lw=1.2, label=tag)
-            for i in range(n):
-                ax[i, j].plot(tt, Xr[:, i], "k.", ms=3, label="recording")
-                ax[i, 0].set_ylabel(spec.state_names[i])
+                X, _ = rollout(P, x0[None], U[None], length, LAG, np.array([row]))
+                for i, k in enumerate(shown):
+                    ax[i, j].plot(tt[1:], X[0, :, k], style, lw=1.2, label=tag)
+            for i, k in enumerate(shown):
+                ax[i, j].plot(tt, Xr[:, k], "k.", ms=3, label="recording")
+                ax[i, 0].set_ylabel(spec.state_names[k])
             ax[-1, j].set_xlabel("time (s)")
         ax[0, 0].legend(fontsize=7)
         fig.suptitle(f"open-loop rollouts from recorded states ({PLOT_ROLLOUT_STEPS} steps), "

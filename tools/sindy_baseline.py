@@ -58,6 +58,8 @@ def sindy_diagnose(rec, spec, base=(), train_mask=None) -> dict:
     """Name an effect by sparse regression. Returns a dict in the report's `selected` form
     plus `terms` (all surviving terms)."""
     base = list(base)
+    if hasattr(spec, "prepare"):          # time-varying models (ball rolling)
+        spec.prepare(rec)
     P0 = patch(spec, base)
     W1 = make_windows(rec, 1)
     sigma = estimate_noise(P0, W1)
@@ -66,9 +68,12 @@ def sindy_diagnose(rec, spec, base=(), train_mask=None) -> dict:
         W1 = W1.take(train_mask(W1))
     e, _ = one_step(P0, W1)
     cands = [c for c in applicable_candidates(spec)[0] if c.definition().physical]
-    S = sensitivity_columns(spec, cands, W1.X0, W1.U, LAG, base_effects=base)   # [W, n, C]
-    X = (S / floor1[None, :, None]).reshape(-1, len(cands))
-    y = (e / floor1).reshape(-1)
+    S = sensitivity_columns(spec, cands, W1.X0, W1.U, LAG, base_effects=base,
+                            rows=W1.row)                                      # [W, n, C]
+    w = getattr(spec, "fit_weight", None)
+    keep = np.ones(S.shape[1], bool) if w is None else np.asarray(w) > 0     # fitted states
+    X = (S / floor1[None, :, None])[:, keep].reshape(-1, len(cands))
+    y = (e / floor1)[:, keep].reshape(-1)
     xi, active, norm = stlsq(X, y)
     contrib = np.abs(xi) * norm
     terms = []
