@@ -158,3 +158,17 @@ def test_bench_loop_times_components_and_restores_them():
     assert abs(sum(row["share"].values()) - 1.0) < 1e-9
     with timed_components({}) as totals:
         assert set(totals) >= {"planner_c3", "anitescu_lcs", "impedance"}
+
+
+@pytest.mark.slow
+def test_fruit_sweep_shortened(tmp_path):
+    """The shipped fruit sweep with 3 trials per cell (issue 9's shortened run)."""
+    from adaptive_c3.tools.sweep import load_sweep, run_sweep
+    plan = load_sweep(SCENARIO_DIR / "fruit_sweep.yaml", ["trials=3"])
+    summary = run_sweep(plan, tmp_path / "sweep", workers=2)
+    import csv
+    with open(tmp_path / "sweep" / "results.csv") as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 18 and all(r["status"] == "ok" for r in rows)
+    assert {r["model.object"] for r in rows} == {"ball", "orange", "lime"}
+    assert json.dumps(summary)   # per-cell rates with Wilson intervals, JSON-serialisable
