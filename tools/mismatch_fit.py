@@ -153,6 +153,7 @@ def fit_candidates(prob: Problem, cands, init=None, ci: bool = True, W=None) -> 
     if init is None:
         if len(cands) == 1 and cands[0].num_params(spec) == 1:
             grid = cands[0].definition().grid(spec, cands[0].target)
+            grid = (getattr(spec, "grids", None) or {}).get(cands[0].name, grid)
             npts = getattr(spec, "grid_points", 0)
             if npts and len(grid) > npts:       # costly models: a coarser grid
                 grid = grid[np.unique(np.linspace(0, len(grid) - 1, npts).round().astype(int))]
