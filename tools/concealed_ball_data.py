@@ -377,34 +377,9 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> di
 
 def main(argv=None) -> int:
     """python -m adaptive_c3.tools.concealed_ball_data [DRAWS] [FIRST_SEED] [--json FILE]"""
-    import argparse
-    import json
-    from pathlib import Path
-    from adaptive_c3.tools.concealed_data import hit_rates
-    ap = argparse.ArgumentParser(description="hit rate of diagnose on concealed ball draws")
-    ap.add_argument("draws", type=int, nargs="?", default=30)
-    ap.add_argument("first_seed", type=int, nargs="?", default=5000)
-    ap.add_argument("--json", default=None)
-    args = ap.parse_args(argv)
-    rows = []
-    for s in range(args.first_seed, args.first_seed + args.draws):
-        r = score_draw(s)
-        rows.append(r)
-        sel = "+".join(x["name"] + (f"[{x['target']}]" if x.get("target") else "")
-                       for x in r["selected"])
-        bsel = r["baseline_selected"][0]
-        print(f"seed {s}: truth {r['truth']['name']}[{r['truth']['target']}]="
-              f"{r['truth']['value']:.4g} -> {sel} "
-              f"{[round(p['value'], 5) for x in r['selected'] for p in x.get('params', [])]} "
-              f"named={r['named']} in_ci={r['in_interval']} cut={r['clean_cut']:.3g} "
-              f"noisy {r['noisy_rollout_before']:.3g}->{r['noisy_rollout_after']:.3g} | "
-              f"sindy {bsel['name']}[{bsel.get('target', '')}] named={r['baseline_named']} "
-              f"({r['seconds']:.1f}s)", flush=True)
-        if args.json:
-            Path(args.json).write_text(json.dumps(dict(summary=hit_rates(rows), rows=rows),
-                                                  indent=1, default=float))
-    print(json.dumps(hit_rates(rows), indent=1))
-    return 0
+    from adaptive_c3.tools.concealed_data import hit_rate_main
+    return hit_rate_main(argv, score_draw, 5000,
+                         "hit rate of diagnose on concealed ball-rolling draws")
 
 
 if __name__ == "__main__":

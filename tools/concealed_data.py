@@ -292,34 +292,41 @@ def hit_rates(rows) -> dict:
     return out
 
 
-def main(argv=None) -> int:
-    """python -m adaptive_c3.tools.concealed_data [DRAWS] [FIRST_SEED] [--json FILE]"""
+def hit_rate_main(argv, score, first_seed: int, description: str) -> int:
+    """The command line of a concealed-draw harness: [DRAWS] [FIRST_SEED] [--json FILE];
+    score(seed) -> row (see score_draw). Prints one line per draw and the hit rates."""
     import argparse
     import json
-    ap = argparse.ArgumentParser(description="hit rate of diagnose on concealed draws")
+    ap = argparse.ArgumentParser(description=description)
     ap.add_argument("draws", type=int, nargs="?", default=30)
-    ap.add_argument("first_seed", type=int, nargs="?", default=1000)
+    ap.add_argument("first_seed", type=int, nargs="?", default=first_seed)
     ap.add_argument("--json", default=None)
     args = ap.parse_args(argv)
     rows = []
     for s in range(args.first_seed, args.first_seed + args.draws):
-        r = score_draw(s)
+        r = score(s)
         rows.append(r)
         sel = "+".join(x["name"] + (f"[{x['target']}]" if x.get("target") else "")
                        for x in r["selected"])
         bsel = r["baseline_selected"][0]
+        noisy = (f"noisy {r['noisy_rollout_before']:.3g}->{r['noisy_rollout_after']:.3g} "
+                 if "noisy_rollout_before" in r else "")
         print(f"seed {s}: truth {r['truth']['name']}[{r['truth']['target']}]="
               f"{r['truth']['value']:.4g} -> {sel} "
-              f"{[p['value'] for x in r['selected'] for p in x.get('params', [])]} "
-              f"named={r['named']} in_ci={r['in_interval']} cut={r['clean_cut']:.3g} | "
+              f"{[round(p['value'], 5) for x in r['selected'] for p in x.get('params', [])]} "
+              f"named={r['named']} in_ci={r['in_interval']} cut={r['clean_cut']:.3g} {noisy}| "
               f"sindy {bsel['name']}[{bsel.get('target', '')}] named={r['baseline_named']} "
               f"({r['seconds']:.1f}s)", flush=True)
-    summary = hit_rates(rows)
-    print(json.dumps(summary, indent=1))
-    if args.json:
-        Path(args.json).write_text(json.dumps(dict(summary=summary, rows=rows), indent=1,
-                                              default=float))
+        if args.json:   # written after every draw: an interrupted run loses nothing
+            Path(args.json).write_text(json.dumps(dict(summary=hit_rates(rows), rows=rows),
+                                                  indent=1, default=float))
+    print(json.dumps(hit_rates(rows), indent=1))
     return 0
+
+
+def main(argv=None) -> int:
+    """python -m adaptive_c3.tools.concealed_data [DRAWS] [FIRST_SEED] [--json FILE]"""
+    return hit_rate_main(argv, score_draw, 1000, "hit rate of diagnose on concealed draws")
 
 
 if __name__ == "__main__":
