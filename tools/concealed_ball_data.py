@@ -348,31 +348,16 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> dict:
     """Draw, diagnose (and run the SINDy baseline), score against the concealed truth."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.concealed_data import _in_interval, _named
+    from adaptive_c3.tools.concealed_data import score_diagnosis
     from adaptive_c3.tools.diagnose import diagnose
     from adaptive_c3.tools.mismatch_effects_ball import ball_spec
-    from adaptive_c3.tools.mismatch_report import selected_rows
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     kw.setdefault("params", ModelParams.from_scenario(scenario))
     rec, truth, clean = concealed_draw(seed, **kw)
     spec = ball_spec(scenario)
     result = diagnose(rec, spec, progress=False, pairs=pairs)
-    selected = selected_rows(result)
-    before, after = clean_error_cut(rec, clean, result)
-    errs = result["errors"]
-    row = dict(seed=seed, truth=truth.as_dict(), selected=selected,
-               named=_named(selected, truth), in_interval=_in_interval(selected, truth),
-               clean_rollout_before=before, clean_rollout_after=after,
-               clean_cut=before / max(after, 1e-12),
-               noisy_rollout_before=errs["before"]["rollout"]["normalised_rms"],
-               noisy_rollout_after=errs["after"]["rollout"]["normalised_rms"],
-               seconds=result["seconds"])
-    if baseline:
-        from adaptive_c3.tools.sindy_baseline import sindy_diagnose
-        b = sindy_diagnose(rec, spec)
-        row.update(baseline_selected=b["selected"], baseline_named=_named(b["selected"], truth),
-                   baseline_in_interval=_in_interval(b["selected"], truth))
-    return row
+    return score_diagnosis(seed, rec, truth, clean, spec, result, baseline,
+                           error_cut=clean_error_cut)
 
 
 def main(argv=None) -> int:

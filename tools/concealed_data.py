@@ -254,27 +254,11 @@ def score_draw(seed: int, baseline: bool = True, **kw) -> dict:
     from adaptive_c3.scenarios.schema import load_scenario
     from adaptive_c3.tools.diagnose import diagnose
     from adaptive_c3.tools.mismatch_effects import cartpole_spec
-    from adaptive_c3.tools.mismatch_report import selected_rows
     rec, truth, clean = concealed_draw(seed, **kw)
     scenario, _ = load_scenario(DEFAULT_SCENARIO)
     spec = cartpole_spec(scenario)
     result = diagnose(rec, spec, progress=False)
-    selected = selected_rows(result)
-    before, after = clean_error_cut(rec, clean, result)
-    errs = result["errors"]
-    row = dict(seed=seed, truth=truth.as_dict(), selected=selected,
-               named=_named(selected, truth), in_interval=_in_interval(selected, truth),
-               clean_rollout_before=before, clean_rollout_after=after,
-               clean_cut=before / max(after, 1e-12),
-               noisy_rollout_before=errs["before"]["rollout"]["normalised_rms"],
-               noisy_rollout_after=errs["after"]["rollout"]["normalised_rms"],
-               seconds=result["seconds"])
-    if baseline:
-        from adaptive_c3.tools.sindy_baseline import sindy_diagnose
-        b = sindy_diagnose(rec, spec)
-        row.update(baseline_selected=b["selected"], baseline_named=_named(b["selected"], truth),
-                   baseline_in_interval=_in_interval(b["selected"], truth))
-    return row
+    return score_diagnosis(seed, rec, truth, clean, spec, result, baseline)
 
 
 def hit_rates(rows) -> dict:
@@ -290,6 +274,31 @@ def hit_rates(rows) -> dict:
                    baseline_in_interval=rate(rows, "baseline_in_interval"),
                    baseline_none_on_clean=rate(clean, "baseline_named"))
     return out
+
+
+def score_diagnosis(seed, rec, truth, clean, spec, result, baseline: bool = True,
+                    error_cut=None) -> dict:
+    """One draw's row: what diagnose selected against the hidden truth, the error cut
+    against the noise-free data (error_cut(rec, clean, result) -> (before, after);
+    default: this module's clean_error_cut), and (baseline) the SINDy baseline on the
+    same draw."""
+    from adaptive_c3.tools.mismatch_report import selected_rows
+    selected = selected_rows(result)
+    before, after = (error_cut or clean_error_cut)(rec, clean, result)
+    errs = result["errors"]
+    row = dict(seed=seed, truth=truth.as_dict(), selected=selected,
+               named=_named(selected, truth), in_interval=_in_interval(selected, truth),
+               clean_rollout_before=before, clean_rollout_after=after,
+               clean_cut=before / max(after, 1e-12),
+               noisy_rollout_before=errs["before"]["rollout"]["normalised_rms"],
+               noisy_rollout_after=errs["after"]["rollout"]["normalised_rms"],
+               seconds=result["seconds"])
+    if baseline:
+        from adaptive_c3.tools.sindy_baseline import sindy_diagnose
+        b = sindy_diagnose(rec, spec)
+        row.update(baseline_selected=b["selected"], baseline_named=_named(b["selected"], truth),
+                   baseline_in_interval=_in_interval(b["selected"], truth))
+    return row
 
 
 def hit_rate_main(argv, score, first_seed: int, description: str) -> int:
