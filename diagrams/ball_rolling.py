@@ -77,7 +77,8 @@ def make_gait(s: BallRollingScenario) -> RollingGait:
                             back_distance=g.back_distance, roll_height=g.roll_height,
                             lift_height=g.lift_height, place_height=g.place_height,
                             max_ee_speed=g.max_ee_speed, roll_lead=g.roll_lead,
-                            min_height=g.min_height)
+                            min_height=g.min_height, return_mode=g.return_mode,
+                            return_speed=g.return_speed)
     path = CirclePath(tuple(s.target.center), s.target.radius, s.target.lead_deg)
     return RollingGait(settings, path, ball_radius=s.model.ball_radius,
                        ee_radius=s.model.ee_radius)

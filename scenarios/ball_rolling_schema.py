@@ -51,6 +51,8 @@ class Gait:
     return_ee_weight: float = 1.0e4  # C3 weight on EE position in the return phase
     min_height: float = -0.005       # floor of the commanded EE height
     roll_lead: float = 1.0           # roll-phase EE target: 0 over the ball, 1 over its target
+    return_mode: str = "c3"          # c3 | waypoint (straight lines to the gait's targets)
+    return_speed: float = 0.5        # m/s, EE speed in waypoint return phases
 
 
 @dc.dataclass
@@ -122,8 +124,9 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
          "target.center must be [x, y]")
     positive("target.radius", s.target.radius)
     g = s.gait
+    need(g.return_mode in ("c3", "waypoint"), f"gait.return_mode must be c3 or waypoint, got '{g.return_mode}'")
     for key in ("roll_s", "return_s", "back_distance", "lift_height", "max_ee_speed",
-                "return_ee_weight"):
+                "return_ee_weight", "return_speed"):
         positive(f"gait.{key}", getattr(g, key))
     need(g.settle_s >= 0, "gait.settle_s must be >= 0")
     for key in ("roll_height", "place_height"):

@@ -39,7 +39,8 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from adaptive_c3.models.ball_rolling_controller_model import EE_POS, EE_VEL
 from adaptive_c3.systems.c3 import C3Options, C3Solver
 from adaptive_c3.systems.lcs import Lcs
-from adaptive_c3.systems.rolling_gait import PHASES, RollingGait, clamp_ee_command
+from adaptive_c3.systems.rolling_gait import (PHASES, RollingGait, clamp_ee_command,
+                                              step_toward)
 
 N_X, N_U = 19, 3
 
@@ -133,6 +134,9 @@ class BallRollingPlanner(LeafSystem):
         r = self._residual(context)
         gap = self.gap_offset(r)
         target = self._gait.target_state(phase, x, gap)
+        if phase != "roll" and self._gait.s.return_mode == "waypoint":
+            self._waypoint(state, x, phase, gap, iphase, target)
+            return EventStatus.Succeeded()
         solver = self._roll if phase == "roll" else self._ret
         prev = context.get_abstract_state(int(self._plan)).get_value()
         warm = prev if (prev is not None and prev[0] == solver) else None
@@ -158,6 +162,17 @@ class BallRollingPlanner(LeafSystem):
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
         state.get_mutable_abstract_state(int(self._plan)).set_value((solver, sol))
         return EventStatus.Succeeded()
+
+    def _waypoint(self, state, x, phase, gap, iphase, target):
+        """Return phases in "waypoint" mode: a straight line from the last command toward
+        the phase's EE target; no contact force is planned (u0 = the model EE's weight)."""
+        cmd = state.get_mutable_discrete_state(int(self._cmd)).get_value().copy()
+        start = cmd[0:3] if np.all(np.isfinite(cmd[0:3])) else x[EE_POS]
+        goal = self._gait.ee_target(phase, x, gap)
+        p_des, v_des = step_toward(start, goal, self._gait.s.return_speed, self.period_s)
+        cmd = np.concatenate([p_des, v_des, np.zeros(3), self._ee_weight, [iphase],
+                              target[7:9]])
+        state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
 
     # ------------------------------------------------------------------ accessors
     def solution(self, context):

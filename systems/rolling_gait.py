@@ -44,6 +44,9 @@ class GaitSettings:
     max_ee_speed: float = 1.0       # m/s clamp on the commanded EE motion
     min_height: float = -0.01       # m above h_touch: floor of the commanded EE height
     roll_lead: float = 0.0          # roll-phase EE target xy: 0 over the ball, 1 over its target
+    return_mode: str = "c3"         # "c3": C3 with the return weights; "waypoint": straight
+                                    # lines to the phase's EE target at return_speed
+    return_speed: float = 0.5       # m/s, EE speed toward the waypoint ("waypoint" mode)
 
 
 @dataclass(frozen=True)
@@ -124,6 +127,18 @@ class RollingGait:
         return xt
 
 
+def step_toward(p_from, goal, speed: float, dt: float):
+    """One period of a straight-line move from p_from toward goal at `speed` (m/s);
+    returns (p_des, v_des), v_des zero once the goal is reached."""
+    p_from, goal = np.asarray(p_from, float), np.asarray(goal, float)
+    e = goal - p_from
+    n = float(np.linalg.norm(e))
+    if n <= speed * dt:
+        return goal.copy(), np.zeros(3)
+    direction = e / n
+    return p_from + speed * dt * direction, speed * direction
+
+
 def clamp_ee_command(p_now, p_next, v_next, dt: float, max_speed: float):
     """Limit the commanded EE step to max_speed (m/s) over dt; returns (p_des, v_des)."""
     p_now, p_next, v_next = (np.asarray(a, float) for a in (p_now, p_next, v_next))
@@ -137,4 +152,5 @@ def clamp_ee_command(p_now, p_next, v_next, dt: float, max_speed: float):
     return p_now + step, v_next
 
 
-__all__ = ["PHASES", "GaitSettings", "CirclePath", "RollingGait", "clamp_ee_command"]
+__all__ = ["PHASES", "GaitSettings", "CirclePath", "RollingGait", "clamp_ee_command",
+           "step_toward"]
