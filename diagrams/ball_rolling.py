@@ -24,11 +24,12 @@ from dataclasses import dataclass
 import numpy as np
 from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
 from pydrake.systems.framework import DiagramBuilder
-from pydrake.systems.primitives import Adder, ConstantVectorSource, VectorLogSink
+from pydrake.systems.primitives import Adder, ConstantVectorSource, Gain, VectorLogSink
 
 from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NAMES,
                                                               ball_rolling_linearizer,
-                                                              default_state)
+                                                              default_state,
+                                                              ee_input_from_motion)
 from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene, add_point_ee
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
 from adaptive_c3.systems.anitescu_lcs_system import AnitescuLcsSystem
@@ -204,6 +205,7 @@ class BallRollingController:
     ee_desired_state: object     # OutputPort (6): for the impedance controller
     ee_feedforward_force: object  # OutputPort (3)
     lambda_names: list
+    r_comp: object = None        # OutputPort (m): the learned residual at the planning dt
 
 
 def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_force,
@@ -238,12 +240,25 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
                                                    initial_state=x_start))
     num_lambda = len(lin.lambda_names())
 
-    # 6. learner
+    # 6. learner, on its own LCS step (r_comp is rescaled to the planning dt: both carry
+    #    the same gap offset, r dt)
+    dt_learn = m.learner_dt or m.planning_dt
+    learn_sys = lcs_sys
+    if abs(dt_learn - m.planning_dt) > 1e-12:
+        learn_sys = builder.AddSystem(AnitescuLcsSystem(
+            ball_rolling_linearizer(dt=dt_learn, **lin_kwargs), s.c3.rate_hz,
+            initial_state=x_start))
     stride = max(1, int(round(LEARNER_SAMPLE_HZ / s.learner.rate_hz)))
     learner = builder.AddSystem(ResidualLearner(
         learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,
-        enabled=s.learner.enabled, transition_dt=m.planning_dt, transition_stride=stride,
-        input_lag=1, tied_groups=_pair_groups(num_lambda)))
+        enabled=s.learner.enabled, transition_dt=dt_learn, transition_stride=stride,
+        input_lag=1, tied_groups=_pair_groups(num_lambda),
+        input_from_motion=(ee_input_from_motion(m.ee_mass, GRAVITY)
+                           if m.learner_input == "motion" else None)))
+    to_plan = builder.AddSystem(Gain(dt_learn / m.planning_dt, num_lambda))
+    to_plan.set_name("r_comp_at_planning_dt")
+    builder.Connect(learner.GetOutputPort("r_comp"), to_plan.get_input_port())
+    r_comp = to_plan.get_output_port()
 
     # 7. planner
     planner = builder.AddSystem(BallRollingPlanner(
@@ -253,7 +268,7 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
         feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY))
 
     u_port = planner.GetOutputPort("lcs_input")
-    for sys_ in (lcs_sys, loop_sys):
+    for sys_ in {lcs_sys, loop_sys, learn_sys}:
         builder.Connect(lcs_state, sys_.GetInputPort("state"))
         builder.Connect(u_port, sys_.GetInputPort("input"))
     builder.Connect(lcs_state, learner.GetInputPort("state"))
@@ -264,16 +279,16 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
     builder.Connect(ee_force, applied.get_input_port(0))
     builder.Connect(weight.get_output_port(), applied.get_input_port(1))
     builder.Connect(applied.get_output_port(), learner.GetInputPort("input"))
-    builder.Connect(lcs_sys.GetOutputPort("lcs"), learner.GetInputPort("lcs"))
+    builder.Connect(learn_sys.GetOutputPort("lcs"), learner.GetInputPort("lcs"))
     builder.Connect(lcs_state, planner.GetInputPort("state"))
     builder.Connect(lcs_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs"))
     builder.Connect(loop_sys.GetOutputPort("lcs"), planner.GetInputPort("lcs_loop"))
-    builder.Connect(learner.GetOutputPort("r_comp"), planner.GetInputPort("r_comp"))
+    builder.Connect(r_comp, planner.GetInputPort("r_comp"))
 
     return BallRollingController(planner, learner, lcs_sys, lcs_state,
                                  planner.GetOutputPort("ee.desired_state"),
                                  planner.GetOutputPort("ee.feedforward_force"),
-                                 list(lin.lambda_names()))
+                                 list(lin.lambda_names()), r_comp)
 
 
 def controller_prior(s: BallRollingScenario) -> BallRollingScenario:
@@ -340,7 +355,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     _log(builder, lcs_state, "lcs_state", logs)
     for name in ("ee.desired_state", "lcs_input", "phase", "ball_target"):
         _log(builder, planner.GetOutputPort(name), name, logs)
-    _log(builder, learner.GetOutputPort("r_comp"), "r_comp", logs)
+    _log(builder, ctrl.r_comp, "r_comp", logs)
     _log(builder, learner.GetOutputPort("loss"), "loss", logs)
     _log(builder, robot.GetOutputPort("ee.commanded_force"), "ee_force", logs)
     if meshcat is not None:

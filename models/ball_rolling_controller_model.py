@@ -162,6 +162,18 @@ def ball_rolling_linearizer(dt: float = 0.1, num_edges: int = 4, eps_c: float = 
                               num_edges=num_edges, dt=dt, eps_c=eps_c)
 
 
+def ee_input_from_motion(ee_mass: float, gravity: float = 9.81):
+    """f(x_k, x_next, dt) -> the EE force (N, world frame) under which the model's free EE
+    (mass ee_mass) moves as measured: m (v_next - v_k) / dt + m g. For the residual learner:
+    the real EE is position controlled by an arm whose force law is not the model's, so the
+    model is handed the input that reproduces the EE's measured motion."""
+    weight = np.array([0.0, 0.0, ee_mass * gravity])
+
+    def u_from_motion(x_k, x_next, dt):
+        return ee_mass * (np.asarray(x_next)[EE_VEL] - np.asarray(x_k)[EE_VEL]) / dt + weight
+    return u_from_motion
+
+
 def default_state(ball_xy=(0.55, 0.0), ee_offset=None, ball_radius: float = 0.0315,
                   ee_radius: float = 0.0195) -> np.ndarray:
     """A 19-state with the ball resting on the table at ball_xy (identity orientation)

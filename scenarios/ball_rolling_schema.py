@@ -25,6 +25,13 @@ class RollingModel:
     friction_edges: int = 4          # n_e per contact
     eps_c: float = 0.01              # Anitescu regulariser
     planning_dt: float = 0.1         # LCS step, s
+    learner_dt: float = 0.025         # the learner's LCS step, s (0: planning_dt). Shorter
+                                     # steps shrink Anitescu's sliding artefact (a sliding
+                                     # contact separates by mu |v_slip| dt in the model),
+                                     # which the learner would read as a gap offset
+    learner_input: str = "motion"    # applied: the impedance's tip force + the model EE's
+                                     # weight; motion: the force that reproduces the EE's
+                                     # measured motion on the model EE
 
 
 @dc.dataclass
@@ -47,11 +54,13 @@ class Gait:
     roll_height: float = -0.005      # roll-phase EE target
     lift_height: float = 0.03        # lift and side-step height
     place_height: float = -0.005     # where the EE is put down (negative: pressing)
-    max_ee_speed: float = 0.25       # clamp on the commanded EE speed, m/s (reference: 1)
+    max_ee_speed: float = 0.12       # clamp on the commanded EE speed in the roll phase,
+                                     # m/s (reference: 1; faster pushes make the ball
+                                     # coast off the circle)
     return_ee_weight: float = 1.0e4  # C3 weight on EE position in the return phase
     min_height: float = -0.005       # floor of the commanded EE height
     roll_lead: float = 1.0           # roll-phase EE target: 0 over the ball, 1 over its target
-    return_mode: str = "c3"          # c3 | waypoint (straight lines to the gait's targets)
+    return_mode: str = "waypoint"    # c3 | waypoint (straight lines to the gait's targets)
     return_speed: float = 0.5        # m/s, EE speed in waypoint return phases
 
 
@@ -119,6 +128,9 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
         positive(f"model.{key}", getattr(m, key))
     need(math.isfinite(m.radius_error) and abs(m.radius_error) < 0.5 * m.ball_radius,
          f"model.radius_error must be smaller than half the radius, got {m.radius_error}")
+    need(math.isfinite(m.learner_dt) and 0 <= m.learner_dt <= m.planning_dt,
+         f"model.learner_dt must be in [0, planning_dt], got {m.learner_dt}")
+    need(m.learner_input in ("applied", "motion"), f"model.learner_input must be applied or motion, got '{m.learner_input}'")
     need(m.friction_edges in (4, 8), f"model.friction_edges must be 4 or 8, got {m.friction_edges}")
     need(len(s.target.center) == 2 and all(math.isfinite(v) for v in s.target.center),
          "target.center must be [x, y]")

@@ -100,7 +100,10 @@ class ResidualLearner(LeafSystem):
     initial_residual (default zeros); input_lag (0 or 1, see the module doc);
     tied_groups, lists of residual indices learned as one value (their gradients are
     averaged before the Adam step; e.g. the friction-cone edges of one contact pair,
-    whose rows share one gap, so a gap offset moves them together). For a discrete
+    whose rows share one gap, so a gap offset moves them together); input_from_motion,
+    optional f(x_k, x_{k+1}, span_s) -> u_k: the input that explains the measured motion
+    of the actuated bodies (e.g. a position-controlled end effector whose true force
+    law differs from the model's), used instead of the averaged input port. For a discrete
     plant stepping at the LCS dt, use
     rate_hz = 1/dt: sampling such a plant faster than it steps would pair held states
     with inputs it never used.
@@ -109,8 +112,10 @@ class ResidualLearner(LeafSystem):
     def __init__(self, options: LearnerOptions, num_states: int, num_inputs: int,
                  num_lambda: int, rate_hz: float = 20.0, enabled: bool = True,
                  transition_dt: float | None = None, transition_stride: int = 1,
-                 initial_residual=None, input_lag: int = 0, tied_groups=()):
+                 initial_residual=None, input_lag: int = 0, tied_groups=(),
+                 input_from_motion=None):
         super().__init__()
+        self._input_fn = input_from_motion
         self._groups = [list(map(int, g)) for g in tied_groups]
         if input_lag not in (0, 1):
             raise ValueError(f"ResidualLearner input_lag must be 0 or 1, got {input_lag}")
@@ -252,6 +257,8 @@ class ResidualLearner(LeafSystem):
         if len(history) == self._S + 1:
             x_k, _, lcs_k, _ = history[0]
             u_k = np.mean([h[1] for h in history[self._lag:self._S + self._lag]], axis=0)
+            if self._input_fn is not None:
+                u_k = np.asarray(self._input_fn(x_k, x, self._span), float)
             ws = [h[3] for h in history[:-1] if h[3] is not None and np.any(h[3] != 0)]
             skip = bool(ws) and self._S > 1
             if ws and not skip:
