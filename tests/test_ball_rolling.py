@@ -1,7 +1,7 @@
 """Ball rolling: gait, estimator, sensor, planner guards and short closed-loop runs.
 
 The short runs use the point EE and the camera off (seconds each); the full experiment
-(Panda, camera, 60 s) is in the slow set.
+(Panda, camera, 90 s) is in the slow set.
 """
 import json
 import math
