@@ -128,7 +128,8 @@ class MeshcatControls:
                              Rgba(0.0, 0.0, 0.0, 1.0))
         r = np.asarray(h.learner.residual(h.learner.GetMyContextFromRoot(self._ctx)), float)
         half = r.size // 2
-        offset_mm = float(np.mean(r[:half]) * self.scenario.model.planning_dt * 1e3)
+        m = self.scenario.model   # r is at the learner's LCS step: gap = r x that step
+        offset_mm = float(np.mean(r[:half]) * (m.learner_dt or m.planning_dt) * 1e3)
         if np.isfinite(offset_mm):
             self.meshcat.SetSliderValue(OFFSET_DISPLAY, float(np.clip(offset_mm, -20, 20)))
 
