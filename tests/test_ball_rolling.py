@@ -172,3 +172,28 @@ def test_fruit_sweep_shortened(tmp_path):
     assert len(rows) == 18 and all(r["status"] == "ok" for r in rows)
     assert {r["model.object"] for r in rows} == {"ball", "orange", "lime"}
     assert json.dumps(summary)   # per-cell rates with Wilson intervals, JSON-serialisable
+
+
+def test_waypoint_return_moves_in_straight_lines_at_the_set_speed():
+    from adaptive_c3.systems.rolling_gait import step_toward
+    p, v = step_toward([0.5, 0.0, 0.1], [0.6, 0.0, 0.1], speed=0.5, dt=0.0125)
+    assert np.allclose(p, [0.50625, 0.0, 0.1]) and np.allclose(v, [0.5, 0.0, 0.0])
+    p, v = step_toward([0.599, 0.0, 0.1], [0.6, 0.0, 0.1], speed=0.5, dt=0.0125)
+    assert np.allclose(p, [0.6, 0.0, 0.1]) and np.allclose(v, 0.0)   # arrived: stop
+
+
+def test_learner_input_from_motion_reproduces_the_measured_ee_motion():
+    """Away from the ball, the model EE under u = m dv/dt + m g moves as measured."""
+    from adaptive_c3.models.ball_rolling_controller_model import (
+        EE_POS, EE_VEL, ball_rolling_linearizer, ee_input_from_motion)
+    lin = ball_rolling_linearizer(dt=0.025, ee_mass=1.0)
+    x = default_state((0.55, 0.1))
+    x[EE_POS] = [0.40, -0.10, 0.15]           # far from the ball: no contact
+    x[EE_VEL] = [0.10, 0.00, -0.05]
+    x_next = x.copy()
+    x_next[EE_VEL] = [0.12, -0.03, 0.02]
+    u = ee_input_from_motion(1.0)(x, x_next, 0.025)
+    lcs = lin.linearize(x, u)
+    predicted, lam = lcs.step(x, u)
+    assert np.allclose(lam[:4], 0.0, atol=1e-9)    # EE-ball rows (the ball rests on the table)
+    assert np.allclose(predicted[EE_VEL], x_next[EE_VEL], atol=1e-6)
