@@ -83,3 +83,21 @@ def test_two_workers_and_local_dask_cluster(tmp_path):
     a = json.loads((tmp_path / "par" / plan_trials(plan)[0]["folder"] / "summary.json").read_text())
     b = json.loads((tmp_path / "dask" / plan_trials(plan)[0]["folder"] / "summary.json").read_text())
     assert a["final_state"] == b["final_state"]   # same trial, same result, wherever it ran
+
+
+def test_sweep_paths_figure_has_a_panel_per_cell_with_ball_logs(tmp_path):
+    import numpy as np
+    from adaptive_c3.tools.sweep_paths import plot_sweep_paths
+    plan = load_sweep(SCENARIO_DIR / "error_sweep.yaml")
+    trials = plan_trials(plan)
+    assert plot_sweep_paths(plan, tmp_path, trials) is None      # no trial logs yet
+    a = np.linspace(0, 2 * np.pi, 50)
+    ball = np.zeros((50, 13))
+    ball[:, 4], ball[:, 5] = 0.55 + 0.1 * np.cos(a), 0.1 * np.sin(a)
+    for t in trials[:2]:
+        folder = tmp_path / t["folder"]
+        folder.mkdir(parents=True)
+        np.savez(folder / "log.npz", ball_true=ball)
+        (folder / "summary.json").write_text(json.dumps({"one_circle": True}))
+    path = plot_sweep_paths(plan, tmp_path, trials)
+    assert path == tmp_path / "paths.png" and path.stat().st_size > 1000

@@ -270,8 +270,10 @@ def cmd_sweep(args) -> int:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{plan['name']}"
     summary = run_sweep(plan, out, workers=args.workers, cluster=args.cluster)
+    from adaptive_c3.tools.sweep_paths import plot_sweep_paths
+    figure = plot_sweep_paths(plan, out, plan_trials(plan))
     for cid, c in summary["cells"].items():
         rates = ", ".join(f"{k} {v['successes']}/{v['n']}" for k, v in c["rates"].items())
         print(f"{cid}: {c['completed']}/{c['trials']} done" + (f"; {rates}" if rates else ""))
-    print(f"results in {out}: results.csv, summary.json")
+    print(f"results in {out}: results.csv, summary.json" + (", paths.png" if figure else ""))
     return 0 if summary["errors_now"] == 0 else 1
