@@ -203,7 +203,7 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
     for name, port in (("lcs_state", c.lcs_state), ("ee_force", ctrl.GetOutputPort("ee.commanded_force")),
                        ("tau", wd.GetOutputPort("panda.torque_command")),
                        ("fault", wd.GetOutputPort("watchdog.fault")),
-                       ("r_comp", c.learner.GetOutputPort("r_comp"))):
+                       ("r_comp", c.r_comp)):   # at the planning dt, as in simulation
         sink = builder.AddSystem(VectorLogSink(port.size(), log_period))
         sink.set_name(f"log_{name}")
         builder.Connect(port, sink.get_input_port())
