@@ -135,7 +135,7 @@ class BallRollingPlanner(LeafSystem):
         gap = self.gap_offset(r)
         target = self._gait.target_state(phase, x, gap)
         if phase != "roll" and self._gait.s.return_mode == "waypoint":
-            self._waypoint(state, x, phase, gap, iphase, target)
+            self._waypoint(state, x, iphase, target)
             return EventStatus.Succeeded()
         solver = self._roll if phase == "roll" else self._ret
         prev = context.get_abstract_state(int(self._plan)).get_value()
@@ -163,13 +163,14 @@ class BallRollingPlanner(LeafSystem):
         state.get_mutable_abstract_state(int(self._plan)).set_value((solver, sol))
         return EventStatus.Succeeded()
 
-    def _waypoint(self, state, x, phase, gap, iphase, target):
+    def _waypoint(self, state, x, iphase, target):
         """Return phases in "waypoint" mode: a straight line from the last command toward
-        the phase's EE target; no contact force is planned (u0 = the model EE's weight)."""
+        the phase's EE target (target[EE_POS]); no contact force is planned (u0 = the model
+        EE's weight)."""
         cmd = state.get_mutable_discrete_state(int(self._cmd)).get_value().copy()
         start = cmd[0:3] if np.all(np.isfinite(cmd[0:3])) else x[EE_POS]
-        goal = self._gait.ee_target(phase, x, gap)
-        p_des, v_des = step_toward(start, goal, self._gait.s.return_speed, self.period_s)
+        p_des, v_des = step_toward(start, target[EE_POS], self._gait.s.return_speed,
+                                   self.period_s)
         cmd = np.concatenate([p_des, v_des, np.zeros(3), self._ee_weight, [iphase],
                               target[7:9]])
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)

@@ -126,10 +126,9 @@ class MeshcatControls:
         circle = np.vstack([c[0] + R * np.cos(a), c[1] + R * np.sin(a), np.full(a.size, 0.001)])
         self.meshcat.SetLine("target_circle", np.asarray(circle, order="F"), 1.0,
                              Rgba(0.0, 0.0, 0.0, 1.0))
-        r = np.asarray(h.learner.residual(h.learner.GetMyContextFromRoot(self._ctx)), float)
-        half = r.size // 2
-        m = self.scenario.model   # r is at the learner's LCS step: gap = r x that step
-        offset_mm = float(np.mean(r[:half]) * (m.learner_dt or m.planning_dt) * 1e3)
+        # the gap offset the planner uses (its r_comp input is at the planning dt)
+        r = np.asarray(h.planner.GetInputPort("r_comp").Eval(self._planner_ctx), float)
+        offset_mm = h.planner.gap_offset(r) * 1e3
         if np.isfinite(offset_mm):
             self.meshcat.SetSliderValue(OFFSET_DISPLAY, float(np.clip(offset_mm, -20, 20)))
 

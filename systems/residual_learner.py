@@ -256,9 +256,10 @@ class ResidualLearner(LeafSystem):
         appended = False
         if len(history) == self._S + 1:
             x_k, _, lcs_k, _ = history[0]
-            u_k = np.mean([h[1] for h in history[self._lag:self._S + self._lag]], axis=0)
             if self._input_fn is not None:
                 u_k = np.asarray(self._input_fn(x_k, x, self._span), float)
+            else:
+                u_k = np.mean([h[1] for h in history[self._lag:self._S + self._lag]], axis=0)
             ws = [h[3] for h in history[:-1] if h[3] is not None and np.any(h[3] != 0)]
             skip = bool(ws) and self._S > 1
             if ws and not skip:
