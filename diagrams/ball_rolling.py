@@ -79,7 +79,8 @@ def make_gait(s: BallRollingScenario) -> RollingGait:
                             lift_height=g.lift_height, place_height=g.place_height,
                             max_ee_speed=g.max_ee_speed, roll_lead=g.roll_lead,
                             min_height=g.min_height, return_mode=g.return_mode,
-                            return_speed=g.return_speed)
+                            return_speed=g.return_speed,
+                            place_xy_tolerance=g.place_xy_tolerance)
     path = CirclePath(tuple(s.target.center), s.target.radius, s.target.lead_deg)
     return RollingGait(settings, path, ball_radius=s.model.ball_radius,
                        ee_radius=s.model.ee_radius)

@@ -10,11 +10,12 @@ table and ball are Drake primitives.
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Box, Sphere
+from pydrake.geometry import Box, HalfSpace, Sphere
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
@@ -54,15 +55,42 @@ def add_panda(plant: MultibodyPlant, name: str | None = None) -> ModelInstanceIn
     return panda
 
 
+class _NoDeformableHalfSpaceWarning(logging.Filter):
+    """Drops Drake's "half spaces are not supported for deformable contact" warning: these
+    scenes have no deformable bodies, so it says nothing about them."""
+
+    def filter(self, record):
+        return "not currently supported for deformable contact" not in record.getMessage()
+
+
+_DEFORMABLE_FILTER = _NoDeformableHalfSpaceWarning()
+
+
+def _silence_half_space_deformable_warning():
+    logging.getLogger("drake").addFilter(_DEFORMABLE_FILTER)   # idempotent
+
+
 def add_table(plant: MultibodyPlant, *, top_z: float = TABLE_TOP_Z,
               size=TABLE_SIZE, center_xy=TABLE_CENTER_XY, mu: float = 1.0,
-              color=TABLE_COLOR) -> None:
-    """Registers a table box on the world body with its top face at z = top_z."""
+              color=TABLE_COLOR, half_space: bool = False) -> None:
+    """Registers a table box on the world body with its top face at z = top_z.
+
+    half_space=True: the collision geometry is the half space below z = top_z instead
+    of the box (the visual stays the box). Contact queries against a half space are
+    far cheaper (a compliant fruit mesh against the box's rigid-hydroelastic mesh
+    costs about 20x more); an object that leaves the box's top then stays on the
+    infinite plane, so judge "off the table" from its x-y position."""
     X_WT = RigidTransform([center_xy[0], center_xy[1], top_z - size[2] / 2])
     box = Box(*size)
     world = plant.world_body()
-    plant.RegisterCollisionGeometry(world, X_WT, box, "table_collision",
-                                    CoulombFriction(mu, mu))
+    if half_space:
+        _silence_half_space_deformable_warning()
+        plant.RegisterCollisionGeometry(world, RigidTransform([0.0, 0.0, top_z]),
+                                        HalfSpace(), "table_collision",
+                                        CoulombFriction(mu, mu))
+    else:
+        plant.RegisterCollisionGeometry(world, X_WT, box, "table_collision",
+                                        CoulombFriction(mu, mu))
     plant.RegisterVisualGeometry(world, X_WT, box, "table_visual",
                                  np.asarray(color, float))
 
@@ -106,7 +134,7 @@ def add_ball_rolling_scene(plant: MultibodyPlant, *, ball_radius: float = BALL_R
     fruit meets the table with hydroelastic contact). Call before Finalize().
     """
     panda = add_panda(plant) if with_arm else None
-    add_table(plant, top_z=table_top_z, mu=mu)
+    add_table(plant, top_z=table_top_z, mu=mu, half_space=fruit is not None)
     if fruit is not None:   # a models.fruit.FruitSpec instead of the ball
         from adaptive_c3.models.fruit import add_fruit
         body = add_fruit(plant, fruit, name="ball", position=ball_position, mu=mu,

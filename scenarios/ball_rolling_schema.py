@@ -47,7 +47,8 @@ class Gait:
     """Roll phase (C3 plans with contact) then return phase (lift, move behind, lower).
     Heights are m above the model's EE-on-top-of-ball height (2 R_model + r_ee), which
     the learned EE-ball gap offset lowers (systems/rolling_gait.py)."""
-    roll_s: float = 0.6
+    roll_s: float = 1.0              # long enough to push a fruit over the ridge between
+                                     # two of its resting facets (0.6 s: it rolls back)
     return_s: float = 0.5
     settle_s: float = 0.5            # initial move to the start pose before rolling
     back_distance: float = 0.02      # m behind the ball centre in the return phase
@@ -62,6 +63,8 @@ class Gait:
     roll_lead: float = 1.0           # roll-phase EE target: 0 over the ball, 1 over its target
     return_mode: str = "waypoint"    # c3 | waypoint (straight lines to the gait's targets)
     return_speed: float = 0.5        # m/s, EE speed in waypoint return phases
+    place_xy_tolerance: float = 0.01 # m; > 0: lower the EE in the place phase only once
+                                     # the measured EE is this close (x-y) to its place point
 
 
 @dc.dataclass
@@ -141,6 +144,8 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
                 "return_ee_weight", "return_speed"):
         positive(f"gait.{key}", getattr(g, key))
     need(g.settle_s >= 0, "gait.settle_s must be >= 0")
+    need(math.isfinite(g.place_xy_tolerance) and g.place_xy_tolerance >= 0,
+         f"gait.place_xy_tolerance must be >= 0, got {g.place_xy_tolerance}")
     for key in ("roll_height", "place_height"):
         need(math.isfinite(getattr(g, key)) and abs(getattr(g, key)) < 0.2,
              f"gait.{key} must be a height within 0.2 m, got {getattr(g, key)}")

@@ -47,6 +47,10 @@ class GaitSettings:
     return_mode: str = "c3"         # "c3": C3 with the return weights; "waypoint": straight
                                     # lines to the phase's EE target at return_speed
     return_speed: float = 0.5       # m/s, EE speed toward the waypoint ("waypoint" mode)
+    place_xy_tolerance: float = 0.0 # m; > 0: the place phase lowers the EE only once the
+                                    # measured EE is within this distance (x-y) of its
+                                    # place point (a lagging arm lands on the object's
+                                    # front and drags it back); 0: lower at once
 
 
 @dataclass(frozen=True)
@@ -108,6 +112,9 @@ class RollingGait:
         direction = self.travel_direction(ball[:2])
         behind = ball[:2] - self.s.back_distance * direction
         if phase == "place":
+            tol = self.s.place_xy_tolerance
+            if tol > 0 and np.linalg.norm(x[EE_POS][:2] - behind) > tol:
+                return np.array([behind[0], behind[1], h + self.s.lift_height])
             return np.array([behind[0], behind[1], h + self.s.place_height])
         # settle and side: behind the ball, lifted
         return np.array([behind[0], behind[1], h + self.s.lift_height])

@@ -53,6 +53,27 @@ def test_learned_gap_lowers_every_gait_height():
     assert behind[1] < x[BALL_POS][1]   # behind the ball: it rolls towards +y here
 
 
+def test_place_lowers_only_once_the_arm_is_over_its_place_point():
+    g = _gait(place_xy_tolerance=0.01)
+    x = default_state((0.65, 0.0))
+    place = _gait().ee_target("place", x)          # lowered (no tolerance)
+    side = g.ee_target("side", x)
+    x_far, x_near = x.copy(), x.copy()
+    x_far[0:3] = place + [0.03, 0.0, 0.05]      # lagging 3 cm behind in x-y
+    x_near[0:3] = place + [0.005, 0.0, 0.05]    # within the tolerance
+    assert g.ee_target("place", x_far) == pytest.approx(side)     # held at lift height
+    assert g.ee_target("place", x_near) == pytest.approx(place)   # lowered
+    assert _gait().ee_target("place", x_far) == pytest.approx(place)   # 0: at once
+
+
+def test_off_table_sees_leaving_the_top_and_falling():
+    from adaptive_c3.tools.run_ball_rolling import off_table
+    on = np.array([[0.55, 0.1, 0.03], [0.6, 0.0, 0.03]])
+    assert not off_table(on)
+    assert off_table(np.vstack([on, [1.3, 0.0, 0.03]]))    # beyond the x edge (1.1 m)
+    assert off_table(np.vstack([on, [0.5, 0.0, -0.05]]))   # fell below the top
+
+
 def test_clamp_limits_the_commanded_speed():
     p, v = clamp_ee_command([0, 0, 0], [0.1, 0, 0], [5.0, 0, 0], dt=0.01, max_speed=1.0)
     assert np.linalg.norm(p) == pytest.approx(0.01)
@@ -132,7 +153,7 @@ def test_scenario_loads_and_rejects_bad_gait():
 
 def test_fruit_trial_uses_a_sphere_prior_of_the_fruit_size(tmp_path):
     from adaptive_c3.models.fruit import nominal_sphere
-    s = _run(tmp_path, "model.object=lime", "seed=4", "sim_duration_s=3")
+    s = _run(tmp_path, "model.object=lime", "seed=4", "sim_duration_s=4.5")
     assert s["object"] == "lime"
     assert s["model_radius_m"] == pytest.approx(nominal_sphere("lime")[0])
     assert s["first_contact_s"] is not None      # the EE reaches the lime

@@ -191,13 +191,15 @@ def test_strong_push_rolls_the_orange_away(mesh_dir):
     assert x_end > 0.03
 
 
-def test_tip_sphere_touches_fruit_by_point_contact(mesh_dir):
+@pytest.mark.parametrize("half_space", [False, True])
+def test_tip_sphere_touches_fruit_by_point_contact(mesh_dir, half_space):
     """The Panda tip (a sphere without hydroelastic properties) meets the fruit with
-    fallback point contact."""
+    fallback point contact; the fruit meets the table (box or the half space the fruit
+    scenes use) with hydroelastic contact."""
     builder = DiagramBuilder()
     plant, sg = AddMultibodyPlant(MultibodyPlantConfig(
         time_step=1e-3, discrete_contact_approximation="sap"), builder)
-    add_table(plant)
+    add_table(plant, half_space=half_space)
     spec = sample_fruit("orange", 0)
     body = add_fruit(plant, spec, position=XY, mesh_dir=mesh_dir)
     X = plant.GetDefaultFloatingBaseBodyPose(body)
