@@ -7,7 +7,7 @@ import pytest
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR
 from adaptive_c3.tools.cli import main
-from adaptive_c3.tools.sweep import (SweepError, load_sweep, plan_trials, run_sweep,
+from adaptive_c3.tools.sweep import (SweepError, _check_same_sweep, load_sweep, plan_trials, run_sweep,
                                      wilson_interval)
 
 
@@ -53,6 +53,18 @@ def test_run_and_resume_loses_nothing(tmp_path):
     for c in cells.values():
         r = c["rates"]["stabilised"]
         assert r["n"] == 2 and r["wilson95"][0] <= r["rate"] <= r["wilson95"][1]
+
+
+def test_resume_refuses_a_folder_of_a_different_sweep(tmp_path):
+    plan = load_sweep(_sweep_file(tmp_path))
+    out = tmp_path / "out"
+    (out).mkdir()
+    (out / "sweep_plan.json").write_text(json.dumps({**plan, "fixed": {"sim_duration_s": 99}}))
+    with pytest.raises(SweepError, match="different sweep.*fixed"):
+        run_sweep(plan, out, show_progress=False)
+    more = {**plan, "trials": plan["trials"] + 1}          # more trials: same sweep
+    (out / "sweep_plan.json").write_text(json.dumps(plan))
+    _check_same_sweep(more, out / "sweep_plan.json")
 
 
 def test_wilson_interval_known_values():

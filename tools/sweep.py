@@ -155,10 +155,30 @@ def trial_done(out: Path, trial: dict) -> bool:
 
 
 # ------------------------------------------------------------------ running
+RESUME_KEYS = ("fixed", "grid", "draws", "base_seed")   # what a trial's result depends on
+
+
+def _check_same_sweep(plan: dict, stored_path: Path) -> None:
+    """Resuming into a folder whose trials ran with other settings would mix results
+    (trials are found by cell and index): refuse. The trial count may change."""
+    if not stored_path.is_file():
+        return
+    try:
+        stored = json.loads(stored_path.read_text())
+    except (OSError, ValueError):
+        raise SweepError(f"{stored_path} is unreadable; use a new --out")
+    new = json.loads(json.dumps(plan))
+    differ = [k for k in RESUME_KEYS if stored.get(k) != new.get(k)]
+    if differ:
+        raise SweepError(f"{stored_path.parent} holds trials of a different sweep (differs "
+                         f"in {', '.join(differ)}); resume with the same sweep or use a new --out")
+
+
 def run_sweep(plan: dict, out, workers: int = 1, cluster: str | None = None,
               show_progress: bool | None = None) -> dict:
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    _check_same_sweep(plan, out / "sweep_plan.json")
     (out / "sweep_plan.json").write_text(json.dumps(plan, indent=2))
     trials = plan_trials(plan)
     todo = [t for t in trials if not trial_done(out, t)]
