@@ -192,6 +192,11 @@ def test_fruit_sweep_shortened(tmp_path):
         rows = list(csv.DictReader(f))
     assert len(rows) == 18 and all(r["status"] == "ok" for r in rows)
     assert {r["model.object"] for r in rows} == {"ball", "orange", "lime"}
+    for obj in ("ball", "orange", "lime"):       # adaptation initiates rolling more often
+        started = {on: sum(r["initiated"] == "True" for r in rows
+                           if r["model.object"] == obj and r["learner.enabled"] == on)
+                   for on in ("True", "False")}
+        assert started["True"] > started["False"], (obj, started)
     assert json.dumps(summary)   # per-cell rates with Wilson intervals, JSON-serialisable
 
 
