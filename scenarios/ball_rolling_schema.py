@@ -49,8 +49,8 @@ class Gait:
     the learned EE-ball gap offset lowers (systems/rolling_gait.py)."""
     roll_s: float = 0.6              # fruits need 1.0 (fruit_sweep.yaml): a shorter push
                                      # leaves them short of the ridge to their next resting
-                                     # facet and they roll back; a ball pushed for 1 s with
-                                     # the camera on coasts off the table after 3.7 turns
+                                     # facet and they roll back; a ball under that fruit gait
+                                     # with the camera on coasts off the table after 3.7 turns
     return_s: float = 0.5
     settle_s: float = 0.5            # initial move to the start pose before rolling
     back_distance: float = 0.02      # m behind the ball centre in the return phase
