@@ -74,13 +74,8 @@ def ball_start_xy(s: BallRollingScenario) -> np.ndarray:
 
 def make_gait(s: BallRollingScenario) -> RollingGait:
     g = s.gait
-    settings = GaitSettings(roll_s=g.roll_s, return_s=g.return_s, settle_s=g.settle_s,
-                            back_distance=g.back_distance, roll_height=g.roll_height,
-                            lift_height=g.lift_height, place_height=g.place_height,
-                            max_ee_speed=g.max_ee_speed, roll_lead=g.roll_lead,
-                            min_height=g.min_height, return_mode=g.return_mode,
-                            return_speed=g.return_speed,
-                            place_xy_tolerance=g.place_xy_tolerance)
+    # the schema's Gait carries every GaitSettings field (plus C3's return weight)
+    settings = GaitSettings(**{f.name: getattr(g, f.name) for f in dc.fields(GaitSettings)})
     path = CirclePath(tuple(s.target.center), s.target.radius, s.target.lead_deg)
     return RollingGait(settings, path, ball_radius=s.model.ball_radius,
                        ee_radius=s.model.ee_radius)

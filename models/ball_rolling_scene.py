@@ -66,7 +66,7 @@ class _NoDeformableHalfSpaceWarning(logging.Filter):
 _DEFORMABLE_FILTER = _NoDeformableHalfSpaceWarning()
 
 
-def _silence_half_space_deformable_warning():
+def silence_half_space_deformable_warning():
     logging.getLogger("drake").addFilter(_DEFORMABLE_FILTER)   # idempotent
 
 
@@ -84,7 +84,7 @@ def add_table(plant: MultibodyPlant, *, top_z: float = TABLE_TOP_Z,
     box = Box(*size)
     world = plant.world_body()
     if half_space:
-        _silence_half_space_deformable_warning()
+        silence_half_space_deformable_warning()
         plant.RegisterCollisionGeometry(world, RigidTransform([0.0, 0.0, top_z]),
                                         HalfSpace(), "table_collision",
                                         CoulombFriction(mu, mu))

@@ -46,7 +46,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import logging
 import tempfile
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -62,6 +61,8 @@ from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction, Multibo
 from pydrake.multibody.tree import RigidBody, RotationalInertia, SpatialInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
+
+from adaptive_c3.models.ball_rolling_scene import silence_half_space_deformable_warning
 
 ORANGE_COLOR = (1.0, 0.45, 0.0, 1.0)
 LIME_COLOR = (0.35, 0.75, 0.1, 1.0)
@@ -302,6 +303,7 @@ def settled_pose(spec: FruitSpec, mesh_dir=None, mu: float = 1.0,
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
         time_step=1e-3, discrete_contact_approximation="sap"), builder)
+    silence_half_space_deformable_warning()
     ground = ProximityProperties()
     AddRigidHydroelasticProperties(properties=ground)
     ground.AddProperty("material", "coulomb_friction", CoulombFriction(mu, mu))
@@ -310,13 +312,7 @@ def settled_pose(spec: FruitSpec, mesh_dir=None, mu: float = 1.0,
     body = add_fruit(plant, spec, position=(0.0, 0.0), mu=mu, mesh_dir=mesh_dir,
                      settle=False, visual=False)
     plant.Finalize()
-    drake_log = logging.getLogger("drake")
-    level = drake_log.level
-    drake_log.setLevel(logging.ERROR)   # "half spaces ... deformable contact": n/a
-    try:
-        sim = Simulator(builder.Build())
-    finally:
-        drake_log.setLevel(level)
+    sim = Simulator(builder.Build())
     ctx = plant.GetMyContextFromRoot(sim.get_context())
     slow = 0
     while sim.get_context().get_time() < max_time and slow < 5:

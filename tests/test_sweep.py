@@ -58,7 +58,7 @@ def test_run_and_resume_loses_nothing(tmp_path):
 def test_resume_refuses_a_folder_of_a_different_sweep(tmp_path):
     plan = load_sweep(_sweep_file(tmp_path))
     out = tmp_path / "out"
-    (out).mkdir()
+    out.mkdir()
     (out / "sweep_plan.json").write_text(json.dumps({**plan, "fixed": {"sim_duration_s": 99}}))
     with pytest.raises(SweepError, match="different sweep.*fixed"):
         run_sweep(plan, out, show_progress=False)
