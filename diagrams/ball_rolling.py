@@ -32,14 +32,14 @@ from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NA
                                                               ee_input_from_motion)
 from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene, add_point_ee
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
-from adaptive_c3.systems.anitescu_lcs_system import AnitescuLcsSystem
-from adaptive_c3.systems.ball_pose_sensor import BallPoseSensor
-from adaptive_c3.systems.ball_rolling_estimator import BallRollingEstimator
-from adaptive_c3.systems.ball_rolling_planner import BallRollingPlanner
-from adaptive_c3.systems.c3 import C3Options
-from adaptive_c3.systems.residual_learner import ResidualLearner
-from adaptive_c3.systems.rolling_gait import CirclePath, GaitSettings, RollingGait
-from adaptive_c3.systems.violation_loss import LearnerOptions
+from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
+from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
+from adaptive_c3.systems.rolling.estimator import BallRollingEstimator
+from adaptive_c3.systems.rolling.planner import BallRollingPlanner
+from adaptive_c3.systems.c3.solver import C3Options
+from adaptive_c3.systems.learning.residual_learner import ResidualLearner
+from adaptive_c3.systems.rolling.gait import CirclePath, GaitSettings, RollingGait
+from adaptive_c3.systems.learning.violation_loss import LearnerOptions
 
 LEARNER_SAMPLE_HZ = 200.0
 LOG_PERIOD_S = 0.01
@@ -120,8 +120,8 @@ def learner_options(s: BallRollingScenario) -> LearnerOptions:
 
 def make_impedance_controller(s: BallRollingScenario):
     """The Panda's ImpedanceController with the scenario's gains (simulation and bridge)."""
-    from adaptive_c3.systems.impedance_controller import ImpedanceController
-    from adaptive_c3.systems.impedance_law import ImpedanceGains
+    from adaptive_c3.systems.franka.impedance_controller import ImpedanceController
+    from adaptive_c3.systems.franka.impedance_law import ImpedanceGains
     imp = s.impedance
     gains = ImpedanceGains(translational_stiffness=imp.translational_stiffness,
                            translational_damping=imp.translational_damping,
@@ -138,7 +138,7 @@ def _add_robot(builder, plant, s, panda, ee_instance):
     the (desired_state, feedforward) input ports."""
     imp = s.impedance
     if panda is not None:
-        from adaptive_c3.systems.panda_sim_driver import GravityCompensatedDriver
+        from adaptive_c3.systems.franka.panda_sim_driver import GravityCompensatedDriver
         ctrl = builder.AddSystem(make_impedance_controller(s))
         driver = builder.AddSystem(GravityCompensatedDriver())
         state = plant.get_state_output_port(panda)
@@ -149,7 +149,7 @@ def _add_robot(builder, plant, s, panda, ee_instance):
         builder.Connect(driver.GetOutputPort("panda.actuation"),
                         plant.get_actuation_input_port(panda))
         return ctrl
-    from adaptive_c3.systems.point_ee_impedance import PointEeImpedance
+    from adaptive_c3.systems.franka.point_ee_impedance import PointEeImpedance
     ctrl = builder.AddSystem(PointEeImpedance(
         stiffness=imp.translational_stiffness, damping=imp.translational_damping,
         mass=s.point_ee_mass))
@@ -164,8 +164,8 @@ def _add_ball_sensing(builder, plant, scene_graph, s, ball_instance, start_xy):
     """Returns the system with "ball.position" / "ball.velocity" outputs."""
     cam = s.camera
     if cam.enabled:
-        from adaptive_c3.systems.ball_detector import BallDetector
-        from adaptive_c3.systems.camera import add_overhead_camera, overhead_camera_spec
+        from adaptive_c3.systems.perception.ball_detector import BallDetector
+        from adaptive_c3.systems.perception.camera import add_overhead_camera, overhead_camera_spec
         spec = overhead_camera_spec(target=(s.target.center[0], s.target.center[1], 0.0),
                                     width=cam.width, height=cam.height)
         sensor, spec = add_overhead_camera(builder, scene_graph, spec)
@@ -366,7 +366,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
 
 def _set_panda_start(plant, panda, ee_start, s):
     from adaptive_c3.models.panda_kinematics import solve_ik
-    from adaptive_c3.systems.impedance_law import tilted_ee_rotation
+    from adaptive_c3.systems.franka.impedance_law import tilted_ee_rotation
     q = solve_ik(ee_start, tilted_ee_rotation(s.impedance.ee_tilt_deg),
                  q_guess=np.asarray(s.impedance.q_null, float))
     if q is None:

@@ -20,9 +20,9 @@ from pydrake.systems.controllers import DiscreteTimeLinearQuadraticRegulator
 
 from adaptive_c3.models.cartpole import (CartpoleParams, INPUT_NAMES, LAMBDA_NAMES,
                                          STATE_NAMES, cartpole_lcs)
-from adaptive_c3.scenarios.schema import CartpoleScenario
-from adaptive_c3.systems.lcs import Lcs
-from adaptive_c3.systems.lcs_plant import LcsPlant
+from adaptive_c3.scenarios.cartpole_schema import CartpoleScenario
+from adaptive_c3.systems.contact.lcs import Lcs
+from adaptive_c3.systems.contact.lcs_plant import LcsPlant
 
 # Reference C3 settings for the cart-pole (DESIGN.md section 4).
 CARTPOLE_Q = [10.0, 3.0, 1.0, 1.0]
@@ -51,7 +51,7 @@ def cartpole_models(s: CartpoleScenario) -> tuple[Lcs, Lcs]:
 
 
 def cartpole_c3_options(s: CartpoleScenario):
-    from adaptive_c3.systems.c3 import C3Options
+    from adaptive_c3.systems.c3.solver import C3Options
     c = s.c3
     return C3Options.from_dict(dict(
         horizon=c.horizon, admm_iter=c.admm_iter, projection=c.projection,
@@ -62,7 +62,7 @@ def cartpole_c3_options(s: CartpoleScenario):
 
 
 def learner_options(cfg, num_lambda: int):
-    from adaptive_c3.systems.violation_loss import LearnerOptions
+    from adaptive_c3.systems.learning.violation_loss import LearnerOptions
     return LearnerOptions(epsilon=cfg.epsilon, gamma=cfg.gamma,
                           learning_rate=cfg.learning_rate, batch_size=cfg.batch_size,
                           Qd=list(cfg.qd_diag) or None, max_step=cfg.max_step,
@@ -121,9 +121,9 @@ def build_cartpole_diagram(s: CartpoleScenario, model_lcs: Lcs | None = None) ->
         builder.Connect(measured, controller.get_input_port())
         input_port = controller.get_output_port()
     else:
-        from adaptive_c3.systems.c3_controller import C3Controller
+        from adaptive_c3.systems.c3.controller import C3Controller
         if s.learner.enabled:
-            from adaptive_c3.systems.residual_learner import ResidualLearner
+            from adaptive_c3.systems.learning.residual_learner import ResidualLearner
             learner = builder.AddNamedSystem("residual_learner", ResidualLearner(
                 learner_options(s.learner, 2), 4, 1, 2, rate_hz=s.learner.rate_hz,
                 input_lag=1))  # C3's input is state set at the plant's step instant

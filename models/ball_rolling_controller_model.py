@@ -28,7 +28,7 @@ from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction, Multibo
 from pydrake.multibody.tree import PrismaticJoint, SpatialInertia
 from pydrake.systems.framework import Diagram, DiagramBuilder
 
-from adaptive_c3.systems.anitescu_lcs import AnitescuLinearizer, ContactPair
+from adaptive_c3.systems.contact.anitescu_lcs import AnitescuLinearizer, ContactPair
 
 STATE_NAMES = (
     "ee_x_x", "ee_y_x", "ee_z_x",

@@ -10,7 +10,6 @@ table and ball are Drake primitives.
 """
 from __future__ import annotations
 
-import logging
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -20,6 +19,8 @@ from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
 from pydrake.multibody.tree import ModelInstanceIndex, PrismaticJoint, SpatialInertia
+
+from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
 
 PANDA_URDF = Path(__file__).with_name("panda.urdf")
 EE_TIP_FRAME = "panda_ee_tip"   # sphere centre of the end-effector tool
@@ -53,21 +54,6 @@ def add_panda(plant: MultibodyPlant, name: str | None = None) -> ModelInstanceIn
     plant.WeldFrames(plant.world_frame(),
                      plant.GetFrameByName(BASE_FRAME, panda), RigidTransform())
     return panda
-
-
-class _NoDeformableHalfSpaceWarning(logging.Filter):
-    """Drops Drake's "half spaces are not supported for deformable contact" warning: these
-    scenes have no deformable bodies, so it says nothing about them."""
-
-    def filter(self, record):
-        return "not currently supported for deformable contact" not in record.getMessage()
-
-
-_DEFORMABLE_FILTER = _NoDeformableHalfSpaceWarning()
-
-
-def silence_half_space_deformable_warning():
-    logging.getLogger("drake").addFilter(_DEFORMABLE_FILTER)   # idempotent
 
 
 def add_table(plant: MultibodyPlant, *, top_z: float = TABLE_TOP_Z,

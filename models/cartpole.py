@@ -10,7 +10,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from adaptive_c3.systems.lcs import Lcs
+from adaptive_c3.systems.contact.lcs import Lcs
 
 STATE_NAMES = ("cart_x", "pole_theta", "cart_xdot", "pole_thetadot")
 INPUT_NAMES = ("cart_force",)

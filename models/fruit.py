@@ -62,7 +62,7 @@ from pydrake.multibody.tree import RigidBody, RotationalInertia, SpatialInertia
 from pydrake.systems.analysis import Simulator
 from pydrake.systems.framework import DiagramBuilder
 
-from adaptive_c3.models.ball_rolling_scene import silence_half_space_deformable_warning
+from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
 
 ORANGE_COLOR = (1.0, 0.45, 0.0, 1.0)
 LIME_COLOR = (0.35, 0.75, 0.1, 1.0)

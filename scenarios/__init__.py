@@ -1,1 +1,3 @@
-"""scenarios."""
+"""The user-facing scenario YAMLs, sweep files, and their typed schemas and loader.
+
+Imports nothing else of the project."""

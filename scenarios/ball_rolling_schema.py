@@ -6,7 +6,7 @@ import dataclasses as dc
 import math
 from typing import List
 
-from adaptive_c3.scenarios.schema import (C3Config, LearnerConfig, ScenarioError,
+from adaptive_c3.scenarios.common import (C3Config, LearnerConfig, ScenarioError,
                                           _validate_common, register_task)
 
 
@@ -46,7 +46,7 @@ class TargetPath:
 class Gait:
     """Roll phase (C3 plans with contact) then return phase (lift, move behind, lower).
     Heights are m above the model's EE-on-top-of-ball height (2 R_model + r_ee), which
-    the learned EE-ball gap offset lowers (systems/rolling_gait.py)."""
+    the learned EE-ball gap offset lowers (systems/rolling/gait.py)."""
     roll_s: float = 0.6              # fruits need 1.0 (fruit_sweep.yaml): a shorter push
                                      # leaves them short of the ridge to their next resting
                                      # facet and they roll back; a ball under that fruit gait

@@ -12,86 +12,15 @@ import dataclasses as dc
 import math
 import typing
 from pathlib import Path
-from typing import List, Optional
+from typing import List
 
 import yaml
 from pydrake.common.yaml import yaml_load_typed
 
+from adaptive_c3.scenarios import ball_rolling_schema, cartpole_schema  # noqa: F401 (register their tasks)
+from adaptive_c3.scenarios.common import TASKS, ScenarioError
+
 SCENARIO_DIR = Path(__file__).resolve().parent
-
-
-class ScenarioError(ValueError):
-    """A scenario could not be loaded; the message is one line for the user."""
-
-
-# ---------------------------------------------------------------- sections
-@dc.dataclass
-class C3Config:
-    """C3 MPC settings. Diagonals are over z = [x, lambda, u] (g_diag, u_diag),
-    x (q_diag) and u (r_diag); empty lists mean the task's reference values."""
-    horizon: int = 10
-    admm_iter: int = 10
-    rate_hz: float = 80.0          # replanning rate, Hz
-    projection: str = "c3plus"     # c3plus | qp | exact
-    qp_backend: str = "kkt"        # kkt | osqp
-    rho_scale: float = 2.0
-    warm_start: bool = True
-    q_diag: List[float] = dc.field(default_factory=list)
-    r_diag: List[float] = dc.field(default_factory=list)
-    g_diag: List[float] = dc.field(default_factory=list)
-    u_diag: List[float] = dc.field(default_factory=list)
-
-
-@dc.dataclass
-class LearnerConfig:
-    """Online residual learner (paper Algorithm 1)."""
-    enabled: bool = False
-    learning_rate: float = 5e-3    # Adam step size xi
-    epsilon: float = 1e-3          # loss parameter, > 0
-    gamma: float = 1e-2            # 0 < gamma < sigma_min(F + F')
-    batch_size: int = 10           # n_b
-    rate_hz: float = 20.0          # update rate, Hz
-    max_step: float = 0.01         # bound on one update of any entry
-    lr_decay_steps: float = 0.0    # optional: step size xi / (1 + t / this), t = Adam steps; 0 = off
-    qd_diag: List[float] = dc.field(default_factory=list)  # Q_d diagonal (empty = identity)
-
-
-@dc.dataclass
-class Disturbance:
-    """A velocity kick added to the state at time `at_s` (units of the state)."""
-    at_s: float = 0.0
-    delta_state: List[float] = dc.field(default_factory=list)
-
-
-@dc.dataclass
-class CartpoleModel:
-    wall_stiffness: float = 50.0        # ks, N/m
-    wall_distance: float = 0.35         # true wall offsets, m
-    wall_offset_error: List[float] = dc.field(default_factory=lambda: [0.0, 0.0])  # delta_phi, m
-
-
-@dc.dataclass
-class CartpoleScenario:
-    task: str = "cartpole"
-    name: str = "cartpole"
-    controller: str = "c3"              # c3 | lqr
-    model: CartpoleModel = dc.field(default_factory=CartpoleModel)
-    c3: C3Config = dc.field(default_factory=C3Config)
-    learner: LearnerConfig = dc.field(default_factory=LearnerConfig)
-    initial_state: List[float] = dc.field(default_factory=lambda: [0.1, -0.3, 0.0, 0.0])
-    disturbances: List[Disturbance] = dc.field(default_factory=list)
-    measurement_noise: List[float] = dc.field(default_factory=list)  # std per state
-    sim_duration_s: float = 8.0
-    stabilise_tolerance: float = 0.05   # |x|_inf below this counts as stabilised
-    seed: int = 0
-
-
-TASKS = {}   # task name -> (schema dataclass, validator function)
-
-
-def register_task(name: str, schema, validator) -> None:
-    """Let a task add its schema and its range checks."""
-    TASKS[name] = (schema, validator)
 
 
 # ---------------------------------------------------------------- loading
@@ -200,15 +129,10 @@ def _check_value(hint, value, path: str) -> None:
             raise ScenarioError(f"{path}: expected a string, got {value!r}")
 
 
-def _register_builtin_tasks():
-    import adaptive_c3.scenarios.ball_rolling_schema  # noqa: F401  (registers itself)
-
-
 def load_scenario(path, overrides: list[str] = ()):
     """Load, include, override, type-check and validate a scenario file.
 
     Returns (scenario dataclass, merged YAML text)."""
-    _register_builtin_tasks()
     path = Path(path)
     data = _read_yaml(path.resolve())
     for text in overrides:
@@ -226,59 +150,6 @@ def load_scenario(path, overrides: list[str] = ()):
         raise ScenarioError(f"{path.name}: {str(e).splitlines()[0]}")
     validate(scenario)
     return scenario, text
-
-
-def _validate_common(s) -> None:
-    """Range checks shared by all tasks."""
-    def need(cond, msg):
-        if not cond:
-            raise ScenarioError(msg)
-    need(s.sim_duration_s > 0 and math.isfinite(s.sim_duration_s),
-         f"sim_duration_s must be > 0, got {s.sim_duration_s}")
-    c3 = s.c3
-    need(c3.horizon >= 1, f"c3.horizon must be >= 1, got {c3.horizon}")
-    need(c3.admm_iter >= 1, f"c3.admm_iter must be >= 1, got {c3.admm_iter}")
-    need(c3.rate_hz > 0 and math.isfinite(c3.rate_hz), f"c3.rate_hz must be > 0, got {c3.rate_hz}")
-    need(c3.projection in ("c3plus", "qp", "exact"),
-         f"c3.projection must be c3plus, qp or exact, got '{c3.projection}'")
-    need(c3.qp_backend in ("kkt", "osqp"), f"c3.qp_backend must be kkt or osqp, got '{c3.qp_backend}'")
-    need(c3.rho_scale >= 1 and math.isfinite(c3.rho_scale), f"c3.rho_scale must be >= 1, got {c3.rho_scale}")
-    for key in ("q_diag", "r_diag", "g_diag", "u_diag"):
-        vals = getattr(c3, key)
-        need(all(math.isfinite(v) and v >= 0 for v in vals),
-             f"c3.{key} entries must be finite and >= 0, got {vals}")
-    ln = s.learner
-    need(ln.epsilon > 0 and math.isfinite(ln.epsilon), f"learner.epsilon must be > 0, got {ln.epsilon}")
-    need(ln.gamma > 0 and math.isfinite(ln.gamma), f"learner.gamma must be > 0, got {ln.gamma}")
-    need(ln.learning_rate > 0 and math.isfinite(ln.learning_rate),
-         f"learner.learning_rate must be a finite number > 0, got {ln.learning_rate}")
-    need(ln.batch_size >= 1, f"learner.batch_size must be >= 1, got {ln.batch_size}")
-    need(ln.rate_hz > 0 and math.isfinite(ln.rate_hz), f"learner.rate_hz must be > 0, got {ln.rate_hz}")
-    need(ln.max_step > 0 and math.isfinite(ln.max_step), f"learner.max_step must be > 0, got {ln.max_step}")
-    need(all(math.isfinite(v) for v in s.initial_state), "initial_state must be finite")
-
-
-def validate_cartpole(s: CartpoleScenario) -> None:
-    _validate_common(s)
-    if s.controller not in ("c3", "lqr"):
-        raise ScenarioError(f"controller must be c3 or lqr, got '{s.controller}'")
-    if len(s.initial_state) != 4:
-        raise ScenarioError(f"initial_state must have 4 entries for the cart-pole, got {len(s.initial_state)}")
-    m = s.model
-    if not (m.wall_stiffness > 0 and math.isfinite(m.wall_stiffness)):
-        raise ScenarioError(f"model.wall_stiffness must be > 0, got {m.wall_stiffness}")
-    if not (m.wall_distance > 0 and math.isfinite(m.wall_distance)):
-        raise ScenarioError(f"model.wall_distance must be > 0, got {m.wall_distance}")
-    if len(m.wall_offset_error) != 2:
-        raise ScenarioError("model.wall_offset_error must have 2 entries (left, right wall)")
-    for d in s.disturbances:
-        if len(d.delta_state) != 4:
-            raise ScenarioError("disturbances[].delta_state must have 4 entries")
-    if s.measurement_noise and len(s.measurement_noise) != 4:
-        raise ScenarioError("measurement_noise must be empty or have 4 entries")
-
-
-register_task("cartpole", CartpoleScenario, validate_cartpole)
 
 
 def shipped_scenarios() -> list[str]:

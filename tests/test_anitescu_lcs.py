@@ -29,8 +29,8 @@ from pydrake.all import (AddMultibodyPlantSceneGraph, Box, ConstantVectorSource,
 from adaptive_c3.models.ball_rolling_controller_model import (
     BALL_ANGVEL, BALL_POS, BALL_QUAT, BALL_VEL, EE_POS, EE_VEL, INPUT_NAMES, STATE_NAMES,
     ball_rolling_linearizer, build_controller_plant, default_state)
-from adaptive_c3.systems.anitescu_lcs import AnitescuLinearizer, ContactPair
-from adaptive_c3.systems.anitescu_lcs_system import AnitescuLcsSystem
+from adaptive_c3.systems.contact.anitescu_lcs import AnitescuLinearizer, ContactPair
+from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
 
 R_BALL, M_EE, G = 0.0315, 0.01, 9.81
 U_HOLD = np.array([0.0, 0.0, M_EE * G])  # EE gravity compensation, N

@@ -15,10 +15,10 @@ from pydrake.systems.sensors import ImageRgba8U
 from adaptive_c3.models.ball_rolling_scene import (BALL_COLOR, BALL_RADIUS,
                                                    add_ball_rolling_scene)
 from adaptive_c3.models.panda_kinematics import solve_ik
-from adaptive_c3.systems import hough_ball as hb
-from adaptive_c3.systems.ball_detector import BallDetector
-from adaptive_c3.systems.camera import add_overhead_camera, overhead_camera_spec
-from adaptive_c3.systems.impedance_law import tilted_ee_rotation
+from adaptive_c3.systems.perception import hough_ball as hb
+from adaptive_c3.systems.perception.ball_detector import BallDetector
+from adaptive_c3.systems.perception.camera import add_overhead_camera, overhead_camera_spec
+from adaptive_c3.systems.franka.impedance_law import tilted_ee_rotation
 
 ORANGE = (255, 102, 0)       # BALL_COLOR in 8 bit
 GREY = (140, 140, 133)
@@ -80,7 +80,7 @@ def test_camera_pose_and_projection_roundtrip():
 def test_sphere_centre_from_brute_force_silhouette():
     # Rasterise the sphere's image exactly (a pixel is in if its ray passes within R of
     # the centre) with a long focal length; the region's centroid is the ellipse centre.
-    from adaptive_c3.systems.camera import CameraSpec
+    from adaptive_c3.systems.perception.camera import CameraSpec
     spec = CameraSpec(1600, 1200, 0.45, SPEC.X_WC)
     K, Rwc, p = spec.K, spec.R_WC, spec.p_WC
     for P in ([0.66, 0.09, ZC], [0.45, -0.1, ZC]):

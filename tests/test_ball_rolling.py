@@ -12,8 +12,8 @@ import pytest
 from adaptive_c3.models.ball_rolling_controller_model import (BALL_ANGVEL, BALL_POS,
                                                               BALL_QUAT, default_state)
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-from adaptive_c3.systems.ball_rolling_estimator import lcs_state
-from adaptive_c3.systems.rolling_gait import (CirclePath, GaitSettings, RollingGait,
+from adaptive_c3.systems.rolling.estimator import lcs_state
+from adaptive_c3.systems.rolling.gait import (CirclePath, GaitSettings, RollingGait,
                                               clamp_ee_command)
 
 SCENARIO = SCENARIO_DIR / "ball_rolling.yaml"
@@ -92,7 +92,7 @@ def test_estimator_builds_the_rolling_state_and_refuses_garbage():
 
 def test_pose_sensor_holds_its_estimate_on_a_nonfinite_measurement():
     from pydrake.systems.analysis import Simulator
-    from adaptive_c3.systems.ball_pose_sensor import BallPoseSensor
+    from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
     sensor = BallPoseSensor(alpha=1.0)
     sim = Simulator(sensor)
     ctx = sim.get_mutable_context()
@@ -169,8 +169,8 @@ def test_shipped_sweeps_plan_their_cells():
 
 
 def test_bench_loop_times_components_and_restores_them():
-    from adaptive_c3.systems.ball_rolling_planner import BallRollingPlanner
-    from adaptive_c3.tools.bench_loop import measure, timed_components
+    from adaptive_c3.systems.rolling.planner import BallRollingPlanner
+    from adaptive_c3.tools.bench.loop import measure, timed_components
     original = BallRollingPlanner._tick
     row = measure(camera=False, sim_s=0.3)
     assert BallRollingPlanner._tick is original
@@ -201,7 +201,7 @@ def test_fruit_sweep_shortened(tmp_path):
 
 
 def test_waypoint_return_moves_in_straight_lines_at_the_set_speed():
-    from adaptive_c3.systems.rolling_gait import step_toward
+    from adaptive_c3.systems.rolling.gait import step_toward
     p, v = step_toward([0.5, 0.0, 0.1], [0.6, 0.0, 0.1], speed=0.5, dt=0.0125)
     assert np.allclose(p, [0.50625, 0.0, 0.1]) and np.allclose(v, [0.5, 0.0, 0.0])
     p, v = step_toward([0.599, 0.0, 0.1], [0.6, 0.0, 0.1], speed=0.5, dt=0.0125)

@@ -1,13 +1,13 @@
-"""C3 solver (systems/c3.py) and its QP step back-ends (systems/c3_qp.py)."""
+"""C3 solver (systems/c3/solver.py) and its QP step back-ends (systems/c3/qp.py)."""
 import numpy as np
 import pytest
 import scipy.linalg
 
 from adaptive_c3.models.cartpole import cartpole_lcs
-from adaptive_c3.systems.c3 import C3Options, C3Solver, cartpole_c3_options
-from adaptive_c3.systems.c3_qp import DrakeOsqpQp, KktQp, OsqpQp, QpStepData
-from adaptive_c3.systems.lcs import LcsSequence
-from adaptive_c3.tools.bench_c3 import ballroll_c3_options, random_ballroll_lcs
+from adaptive_c3.systems.c3.solver import C3Options, C3Solver, cartpole_c3_options
+from adaptive_c3.systems.c3.qp import DrakeOsqpQp, KktQp, OsqpQp, QpStepData
+from adaptive_c3.systems.contact.lcs import LcsSequence
+from adaptive_c3.tools.bench.c3 import ballroll_c3_options, random_ballroll_lcs
 
 X0S = ([0.1, -0.3, 0.0, 0.0], [0.3, 0.0, 0.3, 0.0])
 

@@ -1,4 +1,4 @@
-"""C3Controller LeafSystem (systems/c3_controller.py) in Drake diagrams."""
+"""C3Controller LeafSystem (systems/c3/controller.py) in Drake diagrams."""
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
@@ -8,10 +8,10 @@ from pydrake.systems.primitives import (ConstantValueSource, ConstantVectorSourc
                                         LogVectorOutput)
 
 from adaptive_c3.models.cartpole import cartpole_lcs
-from adaptive_c3.systems.c3 import C3Solution, cartpole_c3_options
-from adaptive_c3.systems.c3_controller import C3Controller
-from adaptive_c3.systems.lcs import LcsSequence
-from adaptive_c3.systems.lcs_plant import LcsPlant
+from adaptive_c3.systems.c3.solver import C3Solution, cartpole_c3_options
+from adaptive_c3.systems.c3.controller import C3Controller
+from adaptive_c3.systems.contact.lcs import LcsSequence
+from adaptive_c3.systems.contact.lcs_plant import LcsPlant
 
 
 def _diagram(x0, lcs_value, rate_hz=80.0, target=None):
@@ -90,7 +90,7 @@ def test_garbage_inputs_give_zero_input_and_keep_the_plan(bad):
     elif bad == "lcs_none":
         ctrl.GetInputPort("lcs").FixValue(ctx, AbstractValue.Make(None))
     else:
-        from adaptive_c3.tools.bench_c3 import random_ballroll_lcs
+        from adaptive_c3.tools.bench.c3 import random_ballroll_lcs
         ctrl.GetInputPort("lcs").FixValue(ctx, AbstractValue.Make(random_ballroll_lcs(0)))
     sim.AdvanceTo(0.015)                                      # one more replan
     np.testing.assert_array_equal(ctrl.GetOutputPort("input").Eval(ctx), [0.0])

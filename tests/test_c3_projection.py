@@ -1,14 +1,14 @@
-"""Projections of C3 (systems/c3_projection.py): C3+, the convex QP one, the exact one."""
+"""Projections of C3 (systems/c3/projection.py): C3+, the convex QP one, the exact one."""
 import itertools
 
 import numpy as np
 import pytest
 from scipy.optimize import minimize
 
-from adaptive_c3.systems.c3_projection import (ExactProjector, QpProjector,
+from adaptive_c3.systems.c3.projection import (ExactProjector, QpProjector,
                                                complementarity_violation, project_c3plus,
                                                project_exact)
-from adaptive_c3.systems.lcp import solve_lcp
+from adaptive_c3.systems.contact.lcp import solve_lcp
 
 
 def _random_problem(rng, n=4, m=3, k=2, rank=None, eps=0.0):

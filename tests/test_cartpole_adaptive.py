@@ -42,7 +42,7 @@ def test_learner_pairs_the_applied_input_with_each_transition():
     """With the learner's input timing right, every non-kick transition of the closed
     loop has zero loss gradient at r = delta_phi (no bias toward contact)."""
     from adaptive_c3.diagrams.cartpole import cartpole_models
-    from adaptive_c3.systems.violation_loss import violation_loss
+    from adaptive_c3.systems.learning.violation_loss import violation_loss
     s, _ = load_scenario(SCENARIO, ["sim_duration_s=6.0"])
     handles, logs, _ = simulate_cartpole(s, progress_label=None)
     _, x = logs["x"]

@@ -2,7 +2,7 @@
 import numpy as np
 import pytest
 
-from adaptive_c3.tools.gradient_map import (
+from adaptive_c3.tools.studies.gradient_map import (
     BOTH, CONTACT_ONLY, NEITHER, PREDICTED_ONLY, gradient_map_data, make_gradient_map)
 
 DPHI = np.array([-0.15, 0.15])

@@ -12,7 +12,8 @@ import pytest
 
 from adaptive_c3.scenarios.schema import load_scenario
 from adaptive_c3.tools import cli
-from adaptive_c3.tools.hardware import decode_ball_estimate, run_loopback
+from adaptive_c3.tools.hardware.bridge import run_loopback
+from adaptive_c3.tools.hardware.lcm_channels import decode_ball_estimate
 
 FAST = ["camera.enabled=false", "model.radius_error=0"]
 
@@ -151,7 +152,7 @@ def test_two_processes_kill_driver_bridge_stops_commanding(tmp_path):
 
 
 # --------------------------------------------------------------------------------------
-# Interactive Meshcat (issue 8 item 2): systems/meshcat_controls.py. Kept here (this
+# Interactive Meshcat (issue 8 item 2): tools/meshcat_controls.py. Kept here (this
 # change could only add the files it was given); they do not use LCM.
 
 def _click(meshcat, name):
@@ -165,12 +166,12 @@ def _click(meshcat, name):
 
 @pytest.fixture(scope="module")
 def meshcat():
-    from adaptive_c3.systems.meshcat_controls import start_meshcat
+    from adaptive_c3.tools.meshcat_controls import start_meshcat
     return start_meshcat()
 
 
 def test_meshcat_sliders_and_buttons_drive_the_diagram(meshcat):
-    from adaptive_c3.systems import meshcat_controls as M
+    from adaptive_c3.tools import meshcat_controls as M
     s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"),
                          FAST + ["sim_duration_s=0.3"])
     assert meshcat.web_url().startswith("http://localhost:")
@@ -222,7 +223,7 @@ def test_meshcat_page_in_headless_chromium(meshcat, tmp_path):
                 if shutil.which(n)), None)
     if exe is None:
         pytest.skip("no chromium on this machine")
-    from adaptive_c3.systems import meshcat_controls as M
+    from adaptive_c3.tools import meshcat_controls as M
     s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
     c = M.MeshcatControls(meshcat, s)
     try:
@@ -244,7 +245,7 @@ def test_bridge_survives_nonfinite_and_malformed_messages():
     from pydrake.lcm import DrakeLcm
     from pydrake.systems.analysis import Simulator
 
-    from adaptive_c3.tools.hardware import build_hardware_bridge
+    from adaptive_c3.tools.hardware.bridge import build_hardware_bridge
     s = scenario()
     lcm = DrakeLcm("memq://")
     b = build_hardware_bridge(s, lcm)

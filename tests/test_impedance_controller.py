@@ -12,12 +12,12 @@ from pydrake.multibody.plant import MultibodyPlant
 
 from adaptive_c3.models.ball_rolling_scene import add_panda
 from adaptive_c3.models.panda_kinematics import Q_NULL, TAU_MAX, solve_ik
-from adaptive_c3.systems.impedance_controller import ArmModel, ImpedanceController
-from adaptive_c3.systems.impedance_law import (ImpedanceGains, axis_angle_matrix,
+from adaptive_c3.systems.franka.impedance_controller import ArmModel, ImpedanceController
+from adaptive_c3.systems.franka.impedance_law import (ImpedanceGains, axis_angle_matrix,
                                                impedance_torque,
                                                nullspace_projector_transpose,
                                                orientation_error, tilted_ee_rotation)
-from adaptive_c3.systems.panda_sim_driver import GravityCompensatedDriver
+from adaptive_c3.systems.franka.panda_sim_driver import GravityCompensatedDriver
 
 GAINS = ImpedanceGains()
 

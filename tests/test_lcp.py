@@ -8,7 +8,7 @@ from fractions import Fraction
 import numpy as np
 import pytest
 
-from adaptive_c3.systems.lcp import LcpResult, solve_lcp, solve_lcp_enumeration
+from adaptive_c3.systems.contact.lcp import LcpResult, solve_lcp, solve_lcp_enumeration
 
 SIZES = range(1, 11)
 SEEDS = range(12)

@@ -2,7 +2,7 @@ import numpy as np
 import pytest
 
 from adaptive_c3.models.cartpole import CartpoleParams, cartpole_lcs
-from adaptive_c3.systems.lcs import Lcs, LcsError, LcsSequence, as_sequence
+from adaptive_c3.systems.contact.lcs import Lcs, LcsError, LcsSequence, as_sequence
 
 
 def _small(**over):

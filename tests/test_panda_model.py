@@ -11,7 +11,7 @@ from adaptive_c3.models import panda_kinematics as pk
 from adaptive_c3.models.ball_rolling_scene import (BALL_RADIUS, EE_TIP_FRAME,
                                                    FLANGE_FRAME, add_ball_rolling_scene,
                                                    panda_urdf_path)
-from adaptive_c3.systems.panda_sim_driver import GravityCompensatedDriver
+from adaptive_c3.systems.franka.panda_sim_driver import GravityCompensatedDriver
 
 # Published link masses (kg) of Gaz et al. 2019, links 1..7.
 GAZ_MASSES = [4.970684, 0.646926, 3.228604, 3.587895, 1.225946, 1.666555, 0.735522]

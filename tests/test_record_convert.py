@@ -5,13 +5,13 @@ import pytest
 from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
 from adaptive_c3.scenarios.schema import load_scenario
 from adaptive_c3.tools import cli
-from adaptive_c3.tools.record_convert import LcmLogWriter, read_lcm_log
+from adaptive_c3.tools.hardware.record_convert import LcmLogWriter, read_lcm_log
 from adaptive_c3.tools.recording import load_recording
 
 
 @pytest.fixture(scope="module")
 def rig_log(tmp_path_factory):
-    from adaptive_c3.tools.hardware import run_loopback
+    from adaptive_c3.tools.hardware.bridge import run_loopback
     s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"),
                          ["camera.enabled=false", "model.radius_error=0"])
     path = tmp_path_factory.mktemp("rig") / "run.lcmlog"

@@ -1,11 +1,11 @@
 """Issue 4 item 6: r_comp (violation loss) against an additive dynamics residual r_dyn,
-same cart-pole data, same budget (tools/residual_comparison.py)."""
+same cart-pole data, same budget (tools/studies/residual_comparison.py)."""
 import json
 
 import numpy as np
 import pytest
 
-from adaptive_c3.tools.residual_comparison import (
+from adaptive_c3.tools.studies.residual_comparison import (
     compare, extend_kicks, first_stays_below, main, _load, DEFAULT_SCENARIO)
 
 

@@ -10,10 +10,10 @@ from pydrake.systems.framework import DiagramBuilder, LeafSystem
 from pydrake.systems.primitives import ConstantValueSource, ConstantVectorSource, VectorLogSink
 
 from adaptive_c3.models.cartpole import CartpoleParams, cartpole_lcs
-from adaptive_c3.systems.lcs import Lcs
-from adaptive_c3.systems.lcs_plant import LcsPlant
-from adaptive_c3.systems.residual_learner import ResidualLearner
-from adaptive_c3.systems.violation_loss import LearnerOptions
+from adaptive_c3.systems.contact.lcs import Lcs
+from adaptive_c3.systems.contact.lcs_plant import LcsPlant
+from adaptive_c3.systems.learning.residual_learner import ResidualLearner
+from adaptive_c3.systems.learning.violation_loss import LearnerOptions
 
 DPHI = np.array([-0.15, 0.15])
 TRUE = cartpole_lcs()

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from adaptive_c3.models.cartpole import cartpole_lcs
-from adaptive_c3.systems.lcs import Lcs
-from adaptive_c3.systems.violation_loss import (
+from adaptive_c3.systems.contact.lcs import Lcs
+from adaptive_c3.systems.learning.violation_loss import (
     KKT_TOL, LearnerOptions, ViolationLossLearner, adam_update, batch_loss_and_grad,
     check_gamma, prepare_sample, qd_matrix, solve_batch, solve_sample, violation_loss)
 

@@ -4,7 +4,7 @@ import math
 import numpy as np
 import pytest
 
-from adaptive_c3.systems.panda_watchdog import (FAULT_CODES, PandaWatchdog, StatusSample,
+from adaptive_c3.systems.franka.panda_watchdog import (FAULT_CODES, PandaWatchdog, StatusSample,
                                                 WatchdogConfig, WatchdogCore)
 
 Q = np.array([0.0, 0.36, 0.0, -2.2, 0.0, 2.58, 0.0])

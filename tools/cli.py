@@ -9,28 +9,25 @@ import argparse
 import importlib
 import json
 import sys
-from pathlib import Path
+
+from adaptive_c3.tools.user_input import UserError, resolve_scenario_path
 
 USER_ERROR = 2
 
 BENCH_SUITES = {   # suite -> module exposing run_bench(quick) -> list of rows
-    "lcp": "adaptive_c3.tools.bench_lcp",
-    "c3": "adaptive_c3.tools.bench_c3",
-    "learner": "adaptive_c3.tools.bench_learner",
-    "lcs": "adaptive_c3.tools.bench_lcs",
-    "loop": "adaptive_c3.tools.bench_loop",
-    "sweep": "adaptive_c3.tools.bench_sweep",
+    "lcp": "adaptive_c3.tools.bench.lcp",
+    "c3": "adaptive_c3.tools.bench.c3",
+    "learner": "adaptive_c3.tools.bench.learner",
+    "lcs": "adaptive_c3.tools.bench.lcs",
+    "loop": "adaptive_c3.tools.bench.loop",
+    "sweep": "adaptive_c3.tools.bench.sweep",
 }
-
-
-class UserError(Exception):
-    """Raised for mistakes the user can fix; printed as one line."""
 
 
 def _user_error_types():
     from adaptive_c3.scenarios.schema import ScenarioError
     from adaptive_c3.tools.recording import RecordingError
-    from adaptive_c3.systems.lcs import LcsError
+    from adaptive_c3.systems.contact.lcs import LcsError
     from adaptive_c3.tools.sweep import SweepError
     return (UserError, ScenarioError, RecordingError, LcsError, SweepError)
 
@@ -39,18 +36,6 @@ def _scenario_help() -> str:
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, shipped_scenarios
     names = shipped_scenarios()
     return ("shipped scenarios (in " + str(SCENARIO_DIR) + "): " + ", ".join(names)) if names else ""
-
-
-def resolve_scenario_path(name: str) -> Path:
-    """A path as given, or the name of a shipped scenario."""
-    from adaptive_c3.scenarios.schema import SCENARIO_DIR
-    path = Path(name)
-    if path.is_file():
-        return path
-    for candidate in (SCENARIO_DIR / name, SCENARIO_DIR / f"{name}.yaml", SCENARIO_DIR / path.name):
-        if candidate.is_file():
-            return candidate
-    raise UserError(f"scenario file not found: {name}")
 
 
 def cmd_run(args) -> int:
@@ -68,7 +53,7 @@ def cmd_run(args) -> int:
 
 
 def cmd_bench(args) -> int:
-    from adaptive_c3.tools.bench import run_suites
+    from adaptive_c3.tools.bench.runner import run_suites
     suites = list(BENCH_SUITES) if args.suite == "all" else [args.suite]
     run_suites({s: BENCH_SUITES[s] for s in suites}, json_path=args.json, quick=args.quick)
     return 0
@@ -121,7 +106,7 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("recording")
     diag.add_argument("--scenario", required=True)
     diag.add_argument("--out", default=None)
-    diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnose", "cmd_diagnose"))
+    diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnosis.diagnose", "cmd_diagnose"))
 
     hw = sub.add_parser(
         "hardware", help="LCM bridge to a real Franka driver",
@@ -141,7 +126,7 @@ def build_parser() -> argparse.ArgumentParser:
     hw.add_argument("--loopback", action="store_true",
                     help="run the bridge and the simulated driver in one process over memq://, "
                     "in lock-step (a self-test; --duration defaults to the scenario's)")
-    hw.set_defaults(func=_delegate("adaptive_c3.tools.hardware", "cmd_hardware"))
+    hw.set_defaults(func=_delegate("adaptive_c3.tools.hardware.bridge", "cmd_hardware"))
 
     sd = sub.add_parser("sim-driver", help="the simulated robot + ball speaking only LCM (for `hardware`)",
                         description="Runs the true plant (Panda, table, ball; SAP) in real time and "
@@ -151,7 +136,7 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
     sd.add_argument("--status-period", type=float, default=1e-3, help="PANDA_STATUS period, s")
     sd.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
-    sd.set_defaults(func=_delegate("adaptive_c3.tools.sim_driver", "cmd_sim_driver"))
+    sd.set_defaults(func=_delegate("adaptive_c3.tools.hardware.sim_driver", "cmd_sim_driver"))
 
     rec = sub.add_parser("record", help="recordings from a rig")
     rsub = rec.add_subparsers(dest="record_command", required=True)
@@ -161,11 +146,11 @@ def build_parser() -> argparse.ArgumentParser:
     conv.add_argument("--scenario", default=None, help="scenario YAML to store in the recording")
     conv.add_argument("--dt", type=float, default=0.01,
                       help="resample to this uniform step, s (0: every status message)")
-    conv.set_defaults(func=_delegate("adaptive_c3.tools.record_convert", "cmd_record_convert"))
+    conv.set_defaults(func=_delegate("adaptive_c3.tools.hardware.record_convert", "cmd_record_convert"))
 
     gm = sub.add_parser("gradient-map", help="the paper's Fig. 3 for the cart-pole")
     gm.add_argument("--out", default="runs/gradient_map")
-    gm.set_defaults(func=_delegate("adaptive_c3.tools.gradient_map", "cmd_gradient_map"))
+    gm.set_defaults(func=_delegate("adaptive_c3.tools.studies.gradient_map", "cmd_gradient_map"))
     return p
 
 

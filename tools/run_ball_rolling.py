@@ -15,7 +15,7 @@ from pydrake.systems.analysis import Simulator
 from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram, controller_prior
 from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
 from adaptive_c3.models.ball_rolling_scene import TABLE_CENTER_XY, TABLE_SIZE, TABLE_TOP_Z
-from adaptive_c3.systems.rolling_gait import PHASES
+from adaptive_c3.systems.rolling.gait import PHASES
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
 
@@ -99,8 +99,8 @@ def rolling_metrics(logs, scenario, true_radius: float) -> dict:
 
 
 def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = False) -> dict:
-    if meshcat:   # interactive: localhost, sliders + buttons (systems/meshcat_controls.py)
-        from adaptive_c3.systems.meshcat_controls import simulate_interactive, start_meshcat
+    if meshcat:   # interactive: localhost, sliders + buttons (tools/meshcat_controls.py)
+        from adaptive_c3.tools.meshcat_controls import simulate_interactive, start_meshcat
         mc = start_meshcat()
         print(f"Meshcat: {mc.web_url()}", flush=True)
         handles, logs, wall = simulate_interactive(scenario, mc)

@@ -281,7 +281,7 @@ def collect(plan: dict, out: Path) -> dict:
 
 
 def cmd_sweep(args) -> int:
-    from adaptive_c3.tools.cli import UserError
+    from adaptive_c3.tools.user_input import UserError
     try:
         plan = load_sweep(args.sweep_file, args.set or [])
     except SweepError as e:

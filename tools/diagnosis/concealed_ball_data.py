@@ -1,0 +1,356 @@
+"""Ball-rolling test recordings with a concealed effect (the proof harness of `diagnose`).
+
+The data is made by a DIFFERENT simulator than the model being diagnosed: Drake's
+discrete MultibodyPlant with SAP and compliant point contact at 1 kHz (the model is the
+rigid Anitescu LCS of the controller model at the 100 Hz recording step). The plant is
+built here (EE sphere on three prismatic joints, a free ball, a table) so that every
+physical parameter can differ from the model. ONE effect (or none) is drawn with its
+size from a seed the diagnosis never sees:
+
+  contact_offset[ee_ball]       the EE tip sphere is smaller (+) / larger (-): EE-ball gap shift, m
+  contact_offset[ball_table]    the table top is lower (+) / higher (-) than the model's z = 0:
+                                the ball rests below (+) / above (-) its model height
+  friction_coefficient[pair]    mu of that pair (the other stays 1)
+  rolling_resistance[ball_table] a torque c * m g opposing the ball's rolling (c in m)
+  mass_scale[ball]              the ball is heavier / lighter
+  external_force[ball_x|ball_y] a constant force on the ball (a tilted table), N
+  viscous_damping[ball]         a force -b v on the ball (N*s/m)
+  none
+
+Excitation: a 100 Hz controller (zero-order-held EE forces, PD on a moving EE target
+with gravity compensation, computed from the noisy measured state) repeats pushes of the
+ball in random directions, as the reference gait does: the EE lifts over the ball,
+lowers onto its top slowly (no impacts), presses 4-7 mm and rolls it along a min-jerk
+path of bounded peak acceleration (2-10 m/s^2: under mu = 1 neither contact slips, not
+even in the model's 4-edge friction pyramid; the EE-ball contact slips when its mu is
+below about 0.3), then lifts and hovers while the ball rolls on. ONE push per episode
+(many short episodes): the EE lowers onto a ball at rest, never onto a rolling one
+(touching down on a rolling ball slides the contact, where the Anitescu relaxation
+pushes the bodies apart: an artifact of the model that showed as a spurious
+friction_coefficient[ee_ball] on clean data). Side pushes are
+not used: the EE would slide along the ball, where the Anitescu model's relaxation
+separates the bodies (a known artifact that would show on clean data). For the same
+reason friction_coefficient[ball_table] is not drawn: rolling from the top asks the
+table for at most ~0.1 of the normal force, so its mu is not observable here. Recorded: the 19-state with sensor noise (0.5 mm
+positions, 5 mm/s velocities, 0.15 rad/s angular velocities, 2e-3 quaternion) and the
+applied EE force, at 100 Hz, several episodes. The truth is returned, never recorded.
+"""
+from __future__ import annotations
+
+
+import numpy as np
+
+from adaptive_c3.tools.diagnosis.concealed_data import Truth, _either
+from adaptive_c3.tools.diagnosis.effects_ball import ModelParams
+
+DT = 0.01                  # recording / controller step, s
+SIM_DT = 1e-3              # SAP step, s
+G = 9.81
+NOISE_STD = np.concatenate([[5e-4] * 3, [2e-3] * 4, [5e-4] * 3, [5e-3] * 3, [0.15] * 3,
+                            [5e-3] * 3])
+OMEGA0_TRUE = 0.2          # rad/s: rolling-resistance torque saturates above this spin
+
+DRAWABLE = [
+    ("none", ""),
+    ("contact_offset", "ee_ball"), ("contact_offset", "ball_table"),
+    ("friction_coefficient", "ee_ball"),
+    ("rolling_resistance", "ball_table"), ("mass_scale", "ball"),
+    ("external_force", "ball_x"), ("external_force", "ball_y"),
+    ("viscous_damping", "ball"),
+]
+UNITS = {"contact_offset": "m", "friction_coefficient": "1", "rolling_resistance": "m",
+         "mass_scale": "1", "external_force": "N", "viscous_damping": "N*s/m"}
+
+
+def draw_effect(rng, name=None, target=None) -> Truth:
+    if name is None:
+        name, target = DRAWABLE[rng.integers(len(DRAWABLE))]
+    if name == "none":
+        return Truth("none", "", 0.0, "")
+    sign = 1.0 if rng.random() < 0.5 else -1.0
+    value = {
+        "contact_offset": lambda: sign * rng.uniform(0.002, 0.0035),
+        "friction_coefficient": lambda: rng.uniform(0.1, 0.3),
+        "rolling_resistance": lambda: rng.uniform(0.001, 0.004),
+        "mass_scale": lambda: _either(rng, 0.5, 0.75, 1.4, 2.0),
+        "external_force": lambda: sign * rng.uniform(0.02, 0.06),
+        "viscous_damping": lambda: rng.uniform(0.08, 0.3),
+    }[name]()
+    return Truth(name, target or "", float(value), UNITS[name])
+
+
+# ------------------------------------------------------------------ the true plant
+class TruePlant:
+    """EE + ball + table in Drake (SAP, point contact, 1 kHz) with the concealed effect."""
+
+    def __init__(self, p: ModelParams, truth: Truth):
+        from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, Sphere
+        from pydrake.math import RigidTransform
+        from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction,
+                                             MultibodyPlantConfig)
+        from pydrake.multibody.tree import PrismaticJoint, SpatialInertia
+        from pydrake.systems.analysis import Simulator
+        from pydrake.systems.framework import DiagramBuilder
+        self.truth, self.p = truth, p
+        t = truth
+        ee_r, ball_m, table_z = p.ee_radius, p.ball_mass, 0.0
+        mu = {"ee": p.mu, "ball": p.mu, "table": p.mu}
+        if t.name == "contact_offset" and t.target == "ee_ball":
+            ee_r = p.ee_radius - t.value          # gap larger by value
+        if t.name == "contact_offset" and t.target == "ball_table":
+            table_z = -t.value                     # model sees the ball `value` too high
+        if t.name == "mass_scale":
+            ball_m = p.ball_mass * t.value
+        if t.name == "friction_coefficient":       # Drake combines 2ab/(a+b); ball stays mu
+            other = "ee" if t.target == "ee_ball" else "table"
+            mu[other] = t.value * p.mu / (2 * p.mu - t.value)
+        self.ee_r, self.ball_m, self.table_z = ee_r, ball_m, table_z
+        builder = DiagramBuilder()
+        plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+            time_step=SIM_DT, discrete_contact_approximation="sap", contact_model="point"),
+            builder)
+
+        def props(m):
+            pr = ProximityProperties()
+            AddContactMaterial(pr, point_stiffness=1e5, friction=CoulombFriction(m, m))
+            pr.AddProperty("material", "relaxation_time", 2e-3)
+            return pr
+        inst = plant.AddModelInstance("ee")
+        lx = plant.AddRigidBody("ee_x_link", inst, SpatialInertia.Zero())
+        ly = plant.AddRigidBody("ee_y_link", inst, SpatialInertia.Zero())
+        ee = plant.AddRigidBody("ee", inst, SpatialInertia.SolidSphereWithMass(p.ee_mass, ee_r))
+        for name, a, b, ax in (("ee_x", plant.world_frame(), lx.body_frame(), [1, 0, 0]),
+                               ("ee_y", lx.body_frame(), ly.body_frame(), [0, 1, 0]),
+                               ("ee_z", ly.body_frame(), ee.body_frame(), [0, 0, 1])):
+            plant.AddJointActuator(name, plant.AddJoint(PrismaticJoint(name, a, b, ax)))
+        plant.RegisterCollisionGeometry(ee, RigidTransform(), Sphere(ee_r), "ee", props(mu["ee"]))
+        binst = plant.AddModelInstance("ball")
+        ball = plant.AddRigidBody("ball", binst,
+                                  SpatialInertia.SolidSphereWithMass(ball_m, p.ball_radius))
+        plant.RegisterCollisionGeometry(ball, RigidTransform(), Sphere(p.ball_radius), "ball",
+                                        props(mu["ball"]))
+        plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform([0, 0, table_z - 0.05]),
+                                        Box(2.0, 2.0, 0.1), "table", props(mu["table"]))
+        plant.Finalize()
+        self.plant = plant
+        self.diagram = builder.Build()
+        self.sim = Simulator(self.diagram)
+        self.ctx = self.sim.get_mutable_context()
+        self.pctx = plant.GetMyMutableContextFromRoot(self.ctx)
+        self.u_port = plant.get_actuation_input_port()
+        self.f_port = plant.get_applied_generalized_force_input_port()
+        self.u_port.FixValue(self.pctx, np.zeros(3))
+        self.f_port.FixValue(self.pctx, np.zeros(plant.num_velocities()))
+
+    def reset(self, x0):
+        self.ctx.SetTime(0.0)
+        self.plant.SetPositionsAndVelocities(self.pctx, x0)
+        self.sim.Initialize()
+
+    def state(self):
+        return self.plant.GetPositionsAndVelocities(self.pctx).copy()
+
+    def _ball_force(self, x):
+        """Generalized force on the ball's velocities [w(3), v(3)] from the effect."""
+        t, f = self.truth, np.zeros(6)
+        if t.name == "external_force":
+            f[3 if t.target == "ball_x" else 4] = t.value
+        elif t.name == "viscous_damping":
+            f[3:] = -t.value * x[16:19]
+        elif t.name == "rolling_resistance":
+            on_table = x[9] - self.table_z < self.p.ball_radius + 1e-3
+            w = x[13:15]
+            if on_table:
+                f[:2] = -t.value * self.ball_m * G * w / max(np.linalg.norm(w), OMEGA0_TRUE)
+        return f
+
+    def step(self, u, substeps: int = 10):
+        """Advance one recording step with the EE force u held (ZOH)."""
+        self.u_port.FixValue(self.pctx, np.asarray(u, float))
+        tau = np.zeros(self.plant.num_velocities())
+        for _ in range(substeps):
+            if self.truth.name in ("external_force", "viscous_damping", "rolling_resistance"):
+                tau[3:] = self._ball_force(self.state())
+                self.f_port.FixValue(self.pctx, tau)
+            self.sim.AdvanceTo(self.ctx.get_time() + SIM_DT)
+        return self.state()
+
+
+# ------------------------------------------------------------------ excitation
+def _minjerk(p0, p1, T, t):
+    s = np.clip(t / T, 0.0, 1.0)
+    h = 10 * s**3 - 15 * s**4 + 6 * s**5
+    dh = (30 * s**2 - 60 * s**3 + 30 * s**4) / T if t < T else 0.0
+    return p0 + (p1 - p0) * h, (p1 - p0) * dh
+
+
+class Pusher:
+    """Plans EE target segments relative to the measured ball (see the module doc)."""
+
+    def __init__(self, rng, p: ModelParams, center, pushes: int = 1):
+        self.rng, self.p, self.center = rng, p, np.asarray(center, float)
+        self.segs: list = []
+        self.pushes_left = pushes
+        self.hold = None
+
+    def _plan(self, ee, ball, vball):
+        rng, R, r = self.rng, self.p.ball_radius, self.p.ee_radius
+        ball = ball + 0.3 * vball * np.array([1, 1, 0])       # where it will roughly be
+        to_c = self.center - ball[:2]
+        ang = np.arctan2(to_c[1], to_c[0]) + rng.normal(0, 0.9 if np.linalg.norm(to_c) > 0.06 else 2.5)
+        d = np.array([np.cos(ang), np.sin(ang), 0.0])
+        high = 2 * R + r + 0.025
+        # lower onto its top, press and roll it along d (as the reference gait: the EE
+        # and the ball's top move together, no sliding at either contact under mu = 1)
+        press = rng.uniform(0.004, 0.007)
+        start = ball + np.array([0, 0, R + r - press]) - 0.004 * d
+        near = start + np.array([0, 0, 0.006])
+        L, a = rng.uniform(0.03, 0.08), rng.uniform(2.0, 10.0)
+        end = start + L * d
+        T_push = np.sqrt(5.77 * L / a)            # min-jerk peak acceleration = a
+        over = near.copy()
+        over[2] = high
+        lift = end.copy()
+        lift[2] = high
+        cur = ee.copy()
+        up = cur.copy()
+        up[2] = max(cur[2], high)
+        segs = [(cur, up, 0.12), (up, over, 0.25), (over, near, 0.2), (near, start, 0.15),
+                (start, end, T_push), (end, lift, 0.15)]
+        self.segs = [list(s) for s in segs]
+
+    def target(self, t_in_seg, ee, ball, vball):
+        """(p_ref, v_ref, seg done?) - plans a new push when the last one ends."""
+        if self.hold is not None:
+            return self.hold, np.zeros(3)
+        if not self.segs:
+            self.pushes_left -= 1
+            self._plan(ee, ball, vball)
+            self.t0 = t_in_seg
+        while self.segs:
+            p0, p1, T = self.segs[0]
+            tau = t_in_seg - self.t0
+            if tau <= T:
+                return _minjerk(p0, p1, T, tau)
+            self.t0 += T
+            last = self.segs.pop(0)[1]
+            if not self.segs and self.pushes_left <= 0:
+                self.hold = last
+        if self.hold is not None:            # pushes done: hover, the ball rolls on
+            return self.hold, np.zeros(3)
+        self.pushes_left -= 1
+        self._plan(ee, ball, vball)
+        self.t0 = t_in_seg
+        return self.target(t_in_seg, ee, ball, vball)
+
+
+def _random_quat(rng):
+    yaw = rng.uniform(-np.pi, np.pi)
+    q = rng.normal(size=4)
+    q /= np.linalg.norm(q)
+    return q if rng.random() < 0.5 else np.array([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
+
+
+def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: float = 1.6,
+                   params: ModelParams | None = None, noise_scale: float | None = None,
+                   scenario_text: str | None = None):
+    """(Recording, clean states [T, 19]) of the true plant under the pushing excitation."""
+    from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR
+    from adaptive_c3.tools.recording import Recording
+    rng = np.random.default_rng(seed)
+    p = params or ModelParams()
+    if noise_scale is None:
+        noise_scale = rng.uniform(0.7, 1.3)
+    sigma = NOISE_STD * noise_scale
+    plant = TruePlant(p, truth)
+    steps = int(round(duration_s / DT))
+    kp, kd = (2 * np.pi * 4.0) ** 2, 2 * 0.8 * 2 * np.pi * 4.0
+    ts, xs, us, eps, clean = [], [], [], [], []
+    for e in range(episodes):
+        center = np.array([0.55, 0.0]) + rng.uniform(-0.05, 0.05, 2)
+        ball = np.array([*(center + rng.uniform(-0.03, 0.03, 2)), p.ball_radius + plant.table_z])
+        x = np.zeros(19)
+        x[3:7] = _random_quat(rng)
+        x[7:10] = ball
+        x[0:3] = ball + np.array([0, 0, 2 * p.ball_radius + p.ee_radius + 0.04])
+        x[0:2] += rng.uniform(-0.05, 0.05, 2)
+        plant.reset(x[:10].tolist() + [0.0] * 9)
+        x = plant.state()
+        pusher = Pusher(rng, p, center)
+        for k in range(steps):
+            y = x + sigma * rng.standard_normal(19)
+            pref, vref = pusher.target(k * DT, y[0:3], y[7:10], y[16:19])
+            u = p.ee_mass * (kp * (pref - y[0:3]) + kd * (vref - y[10:13]))
+            u[2] += p.ee_mass * G
+            u = np.clip(u, -40.0, 40.0)
+            ts.append(k * DT)
+            xs.append(y)
+            us.append(u)
+            eps.append(e)
+            clean.append(x)
+            x = plant.step(u)
+            if abs(x[7] - 0.55) > 0.8 or abs(x[8]) > 0.8 or not np.all(np.isfinite(x)):
+                break
+    if scenario_text is None:
+        scenario_text = (SCENARIO_DIR / "ball_rolling.yaml").read_text()
+    rec = Recording(t=np.array(ts), x=np.array(xs), u=np.array(us),
+                    state_names=list(STATE_NAMES), input_names=list(INPUT_NAMES),
+                    scenario=scenario_text, episode=np.array(eps, dtype=np.int64))
+    return rec, np.array(clean)
+
+
+def concealed_draw(seed: int, name=None, target=None, **kw):
+    """(Recording, Truth, clean states) for a seed; the truth stays with the harness."""
+    rng = np.random.default_rng([seed, 11])
+    truth = draw_effect(rng, name, target)
+    rec, clean = make_recording(truth, seed=int(rng.integers(2**31)), **kw)
+    return rec, truth, clean
+
+
+# ------------------------------------------------------------------ the harness
+def clean_error_cut(rec, clean, result) -> tuple[float, float]:
+    """Cross-validated rollout error (fitted states) of the original and the patched model
+    against the noise-free truth, in NOISE_STD units."""
+    from adaptive_c3.tools.diagnosis.effects import rollout
+    from adaptive_c3.tools.diagnosis.locate import LAG, make_windows
+    from adaptive_c3.tools.recording import Recording
+    clean_rec = Recording(t=rec.t, x=clean, u=rec.u, state_names=rec.state_names,
+                          input_names=rec.input_names, episode=rec.episode)
+    W = make_windows(clean_rec, result["horizon"])
+    fold, keep = result["foldH"], result["spec"].fit_weight > 0
+    out = []
+    for models in ({k: result["P0"] for k in result["P1_folds"]}, result["P1_folds"]):
+        err = []
+        for k, P in models.items():
+            Wk = W.take(fold == k)
+            X, _ = rollout(P, Wk.X0, Wk.U, result["horizon"], LAG, Wk.row)
+            err.append(((X - Wk.Xt) / NOISE_STD)[..., keep])
+        out.append(float(np.sqrt(np.mean(np.concatenate(err) ** 2))))
+    return out[0], out[1]
+
+
+def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> dict:
+    """Draw, diagnose (and run the SINDy baseline), score against the concealed truth."""
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
+    from adaptive_c3.tools.diagnosis.diagnose import diagnose
+    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
+    kw.setdefault("params", ModelParams.from_scenario(scenario))
+    rec, truth, clean = concealed_draw(seed, **kw)
+    spec = ball_spec(scenario)
+    result = diagnose(rec, spec, progress=False, pairs=pairs)
+    return score_diagnosis(seed, rec, truth, clean, spec, result, baseline,
+                           error_cut=clean_error_cut)
+
+
+def main(argv=None) -> int:
+    """python -m adaptive_c3.tools.diagnosis.concealed_ball_data [DRAWS] [FIRST_SEED] [--json FILE]"""
+    from adaptive_c3.tools.diagnosis.concealed_data import hit_rate_main
+    return hit_rate_main(argv, score_draw, 5000,
+                         "hit rate of diagnose on concealed ball-rolling draws")
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

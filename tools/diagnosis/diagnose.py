@@ -1,0 +1,292 @@
+"""`adaptive-c3 diagnose RECORDING --scenario SCENARIO.yaml [--out DIR]`.
+
+Locates where a recording and the scenario's model disagree, names the physical effect
+the model leaves out (from the library in `effects`), fits it with a 95%
+interval, writes a patched scenario and shows the held-out fit improve:
+DIR/report.json, DIR/report.html (+ PNG plots), DIR/patched_scenario.yaml.
+
+Tasks: cartpole (a constant LCS) and ball_rolling (the controller model's Anitescu LCS
+linearised at every recording sample, tools/diagnosis/effects_ball.py; the recording
+must be sampled at 100 Hz).
+
+Patched scenarios: where an effect maps onto a scenario key it sets the key
+(contact_offset -> model.wall_offset_error, contact_stiffness -> model.wall_stiffness;
+ball rolling: contact_offset[ee_ball] -> model.ee_radius, mass_scale -> model.ball_mass);
+every other effect goes into an `effects:` list. The scenario schema does not know that
+list, so `run` refuses such a file; `diagnose` reads it (the listed effects become part
+of the model it checks), so re-diagnosing with the patched scenario should say `none`.
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
+from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_candidates,
+                                                cartpole_spec, patch)
+from adaptive_c3.tools.diagnosis.fit import Problem, select
+from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
+                                               make_windows, prediction_floor)
+from adaptive_c3.tools.recording import RecordingError, load_recording
+
+HORIZON = 10          # rollout steps for fitting, locating and the reported errors
+BLOCK_STEPS = 200     # longest time block for cross-validation of 1-2 episode recordings
+
+
+def _user_error(msg):
+    from adaptive_c3.tools.user_input import UserError
+    return UserError(msg)
+
+
+# ------------------------------------------------------------------ scenario with effects
+def load_scenario_with_effects(path):
+    """(scenario, merged YAML text, base effects [(Candidate, params)]) for a scenario
+    file that may carry an `effects:` list written by a previous diagnosis."""
+    path = Path(path)
+    if not path.is_file():
+        raise ScenarioError(f"scenario file not found: {path}")
+    try:
+        data = yaml.safe_load(path.read_text()) or {}
+    except yaml.YAMLError:
+        data = None
+    if not isinstance(data, dict) or "effects" not in data:
+        scenario, text = load_scenario(path)
+        return scenario, text, []
+    raw = data.pop("effects") or []
+    if "include" in data:
+        data["include"] = str((path.parent / str(data["include"])).resolve())
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp_path = Path(tmp) / path.name
+        tmp_path.write_text(yaml.safe_dump(data, sort_keys=False))
+        scenario, text = load_scenario(tmp_path)
+    return scenario, text, _parse_effects(raw, path.name)
+
+
+def _parse_effects(raw, where):
+    if not isinstance(raw, list):
+        raise ScenarioError(f"{where}: effects must be a list")
+    out = []
+    for i, e in enumerate(raw):
+        if not isinstance(e, dict) or e.get("name") not in EFFECTS:
+            raise ScenarioError(f"{where}: effects[{i}] needs a name from {', '.join(EFFECTS)}")
+        vals = e.get("value")
+        vals = vals if isinstance(vals, list) else [vals]
+        if not all(isinstance(v, (int, float)) and np.isfinite(v) for v in vals):
+            raise ScenarioError(f"{where}: effects[{i}].value must be finite numbers")
+        out.append((Candidate(e["name"], str(e.get("target") or "")), np.array(vals, float)))
+    return out
+
+
+def model_spec(scenario):
+    task = getattr(scenario, "task", "cartpole")
+    if task == "cartpole":
+        return cartpole_spec(scenario)
+    if task == "ball_rolling":
+        from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+        return ball_spec(scenario)
+    raise _user_error(f"diagnose supports the cartpole and ball_rolling tasks, not '{task}'")
+
+
+def fit_weight(spec) -> np.ndarray:
+    """[n] 1 for the states fitted and scored, 0 for the ignored ones (e.g. quaternions)."""
+    w = getattr(spec, "fit_weight", None)
+    return np.ones(len(spec.state_names)) if w is None else np.asarray(w, float)
+
+
+# ------------------------------------------------------------------ checks
+def check_recording(rec, spec):
+    if list(rec.state_names) != list(spec.state_names):
+        raise RecordingError(
+            f"recording state names {list(rec.state_names)} do not match the scenario's "
+            f"model {list(spec.state_names)}")
+    if list(rec.input_names) != list(spec.input_names):
+        raise RecordingError(
+            f"recording input names {list(rec.input_names)} do not match the scenario's "
+            f"model {list(spec.input_names)}")
+    dts = np.concatenate([np.diff(rec.t[idx]) for _, idx in rec.episodes() if len(idx) > 1])
+    if len(dts) == 0:
+        raise RecordingError("recording has no episode with two or more samples")
+    dt = float(np.median(dts))
+    if abs(dt - spec.dt) > 0.02 * spec.dt or np.max(np.abs(dts - spec.dt)) > 0.1 * spec.dt:
+        raise RecordingError(f"recording is sampled every {dt:.4g} s (not uniformly), the "
+                             f"model steps {spec.dt:.4g} s; resample it to the model's step")
+    longest = max(len(idx) for _, idx in rec.episodes())
+    if longest < 3 * HORIZON:
+        raise RecordingError(f"recording is too short: the longest episode has {longest} "
+                             f"samples, diagnose needs at least {3 * HORIZON}")
+
+
+# ------------------------------------------------------------------ folds
+FOLDS = 3
+
+
+def fold_ids(rec, W) -> tuple[np.ndarray, str]:
+    """[W] cross-validation fold per window (-1 = unused) and a note: episodes dealt to
+    FOLDS folds, or FOLDS-cyclic time blocks when there are fewer than FOLDS episodes."""
+    eps = [e for e, _ in rec.episodes()]
+    if len(eps) >= FOLDS:
+        return W.episode % FOLDS, f"{FOLDS}-fold cross-validation over {len(eps)} episodes"
+    block = int(np.clip(len(rec.t) // (3 * FOLDS), 3 * W.Xt.shape[1], BLOCK_STEPS))
+    block_start = W.row // block
+    block_end = (W.row + W.Xt.shape[1]) // block
+    fold = np.where(block_start == block_end, block_start % FOLDS, -1)   # no straddling
+    return fold, f"{FOLDS}-fold cross-validation over {block}-step time blocks"
+
+
+def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
+    """Out-of-fold errors: RMSE per state and RMS in noise-floor units. models: fold -> P."""
+    from adaptive_c3.tools.diagnosis.effects import rollout
+    from adaptive_c3.tools.diagnosis.locate import LAG
+    keep = (fold >= 0) if mask is None else (fold >= 0) & mask
+    errs = []
+    for k, P in models.items():
+        Wk = W.take(keep & (fold == k))
+        if len(Wk):
+            X, _ = rollout(P, Wk.X0, Wk.U, Wk.Xt.shape[1], LAG, Wk.row)
+            errs.append(X - Wk.Xt)
+    if not errs:
+        return None
+    err = np.concatenate(errs, 0)
+    fl = floor[:err.shape[1]]
+    rmse = np.sqrt(np.mean(err ** 2, axis=(0, 1)))
+    scored = fit_weight(spec) > 0
+    norm = float(np.sqrt(np.mean((err / fl)[..., scored] ** 2)))
+    return dict(rmse={n: float(v) for n, v in zip(spec.state_names, rmse)},
+                normalised_rms=norm, excess_over_noise=float(np.sqrt(max(norm ** 2 - 1.0, 0.0))),
+                windows=int(len(err)))
+
+
+def in_windows(W, windows, rec) -> np.ndarray:
+    ep_ids = rec.episode[W.row] if rec.episode is not None else np.zeros(len(W), int)
+    m = np.zeros(len(W), bool)
+    for w in windows:
+        m |= (ep_ids == w["episode"]) & (W.t0 >= w["start"]) & (W.t0 <= w["end"])
+    return m
+
+
+# ------------------------------------------------------------------ the diagnosis
+def diagnose(rec, spec, base=(), horizon: int = HORIZON, progress: bool | None = None,
+             pairs: bool = True) -> dict:
+    """Run the whole diagnosis on a loaded recording; returns a result dict (no files)."""
+    with np.errstate(all="ignore"):    # trial parameters may blow a rollout up: scored 1e6
+        return _diagnose(rec, spec, base, horizon, progress, pairs)
+
+
+def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
+    from adaptive_c3.tools.progress import Progress
+    start = time.perf_counter()
+    base = list(base)
+    if hasattr(spec, "prepare"):          # time-varying models linearise along the recording
+        spec.prepare(rec)
+    P0 = patch(spec, base)
+    W1, WH = make_windows(rec, 1), make_windows(rec, horizon)
+    sigma = estimate_noise(P0, W1)
+    floor = prediction_floor(P0, sigma, horizon)
+    windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
+    foldH, split_note = fold_ids(rec, WH)
+    fold1, _ = fold_ids(rec, W1)
+    stride = int(getattr(spec, "window_stride", 1))    # costly models: fewer fit windows
+    keep = np.arange(len(WH)) % stride == 0
+    prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
+    if len(prob.folds) < 2:
+        raise RecordingError("recording is too short to hold out data for the fit")
+    cands, not_applicable = applicable_candidates(spec)
+    bar = Progress(len(cands) + (6 if pairs else 0), "diagnose: fitting effects", unit="fits",
+                   enabled=progress)
+    chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs)
+    bar.close()
+    P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
+    before = {k: P0 for k in prob.folds}
+    after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
+             for k in prob.folds}
+    inside1, insideH = in_windows(W1, windows, rec), in_windows(WH, windows, rec)
+    errors = {}
+    for tag, models in (("before", before), ("after", after)):
+        errors[tag] = dict(
+            one_step=error_table(spec, models, W1, fold1, floor),
+            rollout=error_table(spec, models, WH, foldH, floor),
+            inside_mismatch_windows=dict(
+                one_step=error_table(spec, models, W1, fold1, floor, inside1),
+                rollout=error_table(spec, models, WH, foldH, floor, insideH)))
+    return dict(spec=spec, base=base, sigma=sigma, floor=floor, windows=windows, steps=steps,
+                W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
+                fits=fits, none_eval=none_eval, not_applicable=not_applicable,
+                P0=P0, P1=P1, P1_folds=after, errors=errors,
+                contact=contact_summary(spec, steps), horizon=horizon,
+                seconds=time.perf_counter() - start)
+
+
+def patched_scenario_text(scenario_text: str, spec, base, chosen) -> tuple[str, list]:
+    """The scenario YAML with the chosen effects in it; returns (text, notes)."""
+    data = yaml.safe_load(scenario_text) or {}
+    data.pop("effects", None)
+    effects = [(c, np.asarray(p, float)) for c, p in base]
+    notes, intervals = [], {}
+    if chosen is not None:
+        for (c, p), lo_hi in zip(chosen.effects(spec), _split_ci(chosen, spec)):
+            model = data.setdefault("model", {})
+            if c.name == "contact_offset" and spec.name == "cartpole":
+                err = list(model.get("wall_offset_error", [0.0, 0.0]))
+                i = spec.pair_names.index(c.target)
+                err[i] = float(err[i] - p[0])      # model c = wall_distance - error
+                model["wall_offset_error"] = err
+                notes.append(f"contact_offset[{c.target}] -> model.wall_offset_error[{i}]")
+            elif c.name == "contact_stiffness" and spec.name == "cartpole":
+                model["wall_stiffness"] = float(p[0])
+                notes.append("contact_stiffness[walls] -> model.wall_stiffness")
+            elif c.name == "contact_offset" and c.target == "ee_ball":
+                model["ee_radius"] = float(spec.params.ee_radius - p[0])   # gap + offset
+                notes.append("contact_offset[ee_ball] -> model.ee_radius")
+            elif c.name == "mass_scale" and spec.name == "ball_rolling":
+                model["ball_mass"] = float(spec.params.ball_mass * p[0])
+                notes.append("mass_scale[ball] -> model.ball_mass")
+            else:
+                effects.append((c, p))
+                intervals[c] = lo_hi
+    if effects:
+        data["effects"] = [dict(name=c.name, target=c.target,
+                                value=[float(v) for v in p] if len(p) > 1 else float(p[0]),
+                                unit=c.units(spec)[0]) for c, p in effects]
+        for entry, (c, _) in zip(data["effects"], effects):
+            if c in intervals:
+                entry["ci95"] = [[float(a), float(b)] for a, b in intervals[c]]
+        notes.append("effects: list (read by `diagnose`, not by the scenario schema)")
+    return yaml.safe_dump(data, sort_keys=False), notes
+
+
+def _split_ci(fit, spec):
+    out, i = [], 0
+    for c in fit.cands:
+        p = c.num_params(spec)
+        out.append(fit.ci[i:i + p])
+        i += p
+    return out
+
+
+def cmd_diagnose(args) -> int:
+    from adaptive_c3.tools.user_input import resolve_scenario_path
+    from adaptive_c3.tools.diagnosis.report import write_report
+    rec = load_recording(args.recording)
+    scenario, text, base = load_scenario_with_effects(resolve_scenario_path(args.scenario))
+    spec = model_spec(scenario)
+    check_recording(rec, spec)
+    out = Path(args.out) if args.out else Path("runs") / (
+        f"diagnose-{Path(args.recording).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
+    out.mkdir(parents=True, exist_ok=True)
+    result = diagnose(rec, spec, base)
+    patched, notes = patched_scenario_text(text, spec, base, result["chosen"])
+    (out / "patched_scenario.yaml").write_text(
+        "# written by adaptive-c3 diagnose; " + "; ".join(notes or ["no effect selected"])
+        + "\n" + patched)
+    report = write_report(out, rec, result, scenario_notes=notes)
+    sel = ", ".join(s["name"] + (f"[{s['target']}]" if s.get("target") else "")
+                    for s in report["selected"])
+    print(f"selected: {sel}; held-out rollout error (noise-floor units) "
+          f"{report['error_before']['rollout']['normalised_rms']:.3g} -> "
+          f"{report['error_after']['rollout']['normalised_rms']:.3g}")
+    print(f"report in {out}: report.json, report.html, patched_scenario.yaml")
+    return 0

@@ -1,0 +1,363 @@
+"""Fit candidate effects, pick the one(s) held-out data support, give 95% intervals.
+
+Fit: each candidate's parameters minimise the noise-normalised multi-step prediction
+error (open-loop rollouts of `horizon` steps from recorded states with recorded inputs):
+a coarse grid over the physical range, then a bounded Levenberg-Marquardt (least
+squares) from the best grid point.
+
+Held-out scoring is K-fold cross-validation (K = 3) over episodes (or over time blocks
+when there are fewer than three episodes): every window is predicted by parameters
+fitted on the other folds, so every contact event in the recording is used both to
+fit (in two folds) and to test (in one); a single train/test split can leave, say, all
+contact with one wall in the training part. The reported values and intervals come from
+the fit on all the data.
+
+Intervals: a cluster-robust sandwich at the optimum, cov = (J'J)^-1 (sum_c g_c g_c')
+(J'J)^-1 with g_c = J_c' r_c summed over blocks of 50 steps (overlapping rollout windows
+are strongly correlated); plus a bias allowance: the shift of the estimate when refitted
+with half the rollout horizon (noisy start states bias the fit, the more so the shorter
+the rollout), sd^2 + shift^2; 95% = +-1.96 sd. For the chosen effect the sd is the
+larger of that and a delete-one-episode jackknife (the sandwich is too narrow when the
+information sits in few events, e.g. contacts), with the Student t quantile for
+(episodes - 1) degrees of freedom.
+
+Selection on the cross-validated SSR: score = N_eff ln(SSR/N) + p ln(N_eff) (BIC-like;
+N_eff = N / horizon, the residuals of one window being correlated). An effect is
+significant when its score beats the unmodified model's by SCORE_MARGIN (10, "very
+strong" on the BIC scale) AND the held-out SSR drops by >= 2% (on clean data spurious
+fits change it by < 0.1%). Among significant candidates, those within SCORE_MARGIN of
+the best are "equally good"; of those the physical effect is preferred to r_comp, then
+fewer parameters, then the lower score. Pairs of the four best single physical effects
+are fitted too and compete under the same rule when they cut the held-out SSR of each
+of their two effects alone by a further 5% (so a pair wins over a single effect only if
+its score is lower by SCORE_MARGIN, and two physical contact offsets win over the
+equally good two-parameter r_comp). (The paired
+per-cluster z of each fit against the unmodified model is reported, not used: the
+reductions are concentrated in few clusters, e.g. contacts, so it is a poor test.)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from itertools import combinations
+
+import numpy as np
+from scipy.stats import t as student_t
+
+from adaptive_c3.tools.diagnosis.effects import Candidate, patch, rollout
+from adaptive_c3.tools.diagnosis.locate import LAG, Windows
+
+SCORE_MARGIN = 10.0     # "very strong" evidence on the BIC scale
+MIN_REDUCTION = 0.02    # held-out SSR must drop by >= 2% to count
+PAIR_REDUCTION = 0.05   # a pair must cut the chosen single effect's SSR by >= 5% more
+
+
+@dataclass
+class Problem:
+    spec: object
+    base: list                 # effects already in the scenario: [(Candidate, params)]
+    windows: Windows           # all rollout windows
+    fold: np.ndarray           # [W] fold id (0..K-1), -1 = not used
+    weight: np.ndarray         # [H, n] = 1 / prediction floor
+    cluster_steps: int = 50
+
+    @property
+    def horizon(self) -> int:
+        return self.weight.shape[0]
+
+    @property
+    def folds(self) -> list:
+        return sorted(int(k) for k in np.unique(self.fold) if k >= 0)
+
+    def used(self) -> Windows:
+        return self.windows.take(self.fold >= 0)
+
+    def train(self, k) -> Windows:
+        return self.windows.take((self.fold >= 0) & (self.fold != k))
+
+    def test(self, k) -> Windows:
+        return self.windows.take(self.fold == k)
+
+    def truncated(self, horizon: int) -> "Problem":
+        """The same problem with shorter rollouts (for the horizon-sensitivity check)."""
+        W = self.windows
+        cut = Windows(W.X0, W.Xt[:, :horizon], W.U[:, :LAG + horizon], W.row, W.episode, W.t0)
+        return Problem(self.spec, self.base, cut, self.fold, self.weight[:horizon],
+                       self.cluster_steps)
+
+    def residuals(self, effects, W: Windows) -> np.ndarray:
+        """[W, H, n] normalised rollout residuals of the model with `effects` added."""
+        P = patch(self.spec, self.base + list(effects))
+        X, _ = rollout(P, W.X0, W.U, self.horizon, LAG, W.row)
+        r = (X - W.Xt) * self.weight
+        return np.where(np.isfinite(r), r, 1e6)
+
+    def clusters(self, W: Windows) -> np.ndarray:
+        ids = W.episode * 100000 + (W.row // self.cluster_steps)
+        return np.unique(ids, return_inverse=True)[1]
+
+
+@dataclass
+class Fit:
+    cands: tuple               # Candidates
+    values: np.ndarray         # fitted on all the data
+    ci: np.ndarray             # [p, 2]
+    sd: np.ndarray
+    train_ssr: float
+    fold_values: dict = field(default_factory=dict)   # fold -> values fitted without it
+    test_ssr: float = np.nan   # cross-validated
+    test_n: int = 0
+    test_cluster_ssr: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    score: float = np.nan
+    z_vs_none: float = 0.0
+    reduction: float = 0.0
+    significant: bool = False
+    shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
+
+    @property
+    def num_params(self) -> int:
+        return len(self.values)
+
+    def effects(self, spec, values=None):
+        return _split(self.values if values is None else values, self.cands, spec)
+
+    def fold_effects(self, spec, k):
+        return self.effects(spec, self.fold_values.get(k, self.values))
+
+    def label(self) -> str:
+        return " + ".join(c.label() for c in self.cands) or "none"
+
+    @property
+    def physical(self) -> bool:
+        return all(c.definition().physical for c in self.cands)
+
+
+def _split(theta, cands, spec):
+    out, i = [], 0
+    for c in cands:
+        p = c.num_params(spec)
+        out.append((c, np.asarray(theta[i:i + p], float)))
+        i += p
+    return out
+
+
+def fit_candidates(prob: Problem, cands, init=None, ci: bool = True, W=None) -> Fit:
+    """Least-squares fit of one candidate or a set (jointly) on windows W (default: all)."""
+    spec = prob.spec
+    W = prob.used() if W is None else W
+    lo = np.concatenate([c.bounds(spec)[0] for c in cands])
+    hi = np.concatenate([c.bounds(spec)[1] for c in cands])
+
+    def fun(theta):
+        return prob.residuals(_split(theta, cands, spec), W).ravel()
+
+    if init is None:
+        if len(cands) == 1 and cands[0].num_params(spec) == 1:
+            grid = cands[0].definition().grid(spec, cands[0].target)
+            grid = (getattr(spec, "grids", None) or {}).get(cands[0].name, grid)
+            npts = getattr(spec, "grid_points", 0)
+            if npts and len(grid) > npts:       # costly models: a coarser grid
+                grid = grid[np.unique(np.linspace(0, len(grid) - 1, npts).round().astype(int))]
+            costs = [np.sum(fun(np.array([g])) ** 2) for g in grid]
+            init = np.array([grid[int(np.argmin(costs))]])
+        else:
+            init = np.concatenate([c.nominal(spec) for c in cands])
+    init = np.clip(np.asarray(init, float), lo + 1e-12, hi - 1e-12)
+    scale = np.maximum(np.abs(hi - lo) / 20.0, 1e-6)
+    theta, r, Jt = levenberg_marquardt(fun, init, lo, hi, scale)
+    if not ci:
+        return Fit(tuple(cands), theta, np.zeros((len(theta), 2)), np.zeros(len(theta)),
+                   float(r @ r))
+    sd = _sandwich_sd(Jt, r, prob.clusters(W), W)
+    ci = np.stack([theta - 1.96 * sd, theta + 1.96 * sd], 1)
+    return Fit(tuple(cands), theta, ci, sd, float(r @ r))
+
+
+def cv_fit(prob: Problem, cands, init=None) -> Fit:
+    """Fit on all the data (grid + LM), then once per fold without that fold."""
+    fit = fit_candidates(prob, cands, init)
+    for k in prob.folds:
+        fit.fold_values[k] = fit_candidates(prob, cands, init=fit.values, ci=False,
+                                            W=prob.train(k)).values
+    return fit
+
+
+def widen_for_bias(prob: Problem, fit: Fit) -> Fit:
+    """Add the horizon sensitivity to the sandwich interval (see the module doc)."""
+    short = fit_candidates(prob.truncated(max(prob.horizon // 2, 1)), list(fit.cands),
+                           init=fit.values, ci=False)
+    fit.shift = fit.values - short.values
+    fit.sd = np.sqrt(fit.sd ** 2 + fit.shift ** 2)
+    fit.ci = np.stack([fit.values - 1.96 * fit.sd, fit.values + 1.96 * fit.sd], 1)
+    return fit
+
+
+def jackknife(prob: Problem, fit: Fit, groups: int = 8) -> Fit:
+    """Widen the chosen fit's interval with a delete-one-group jackknife over episodes
+    (or time blocks) and the Student t quantile."""
+    W = prob.used()
+    eps = np.unique(W.episode)
+    if len(eps) >= 4:
+        gid = np.searchsorted(eps, W.episode) % groups
+    else:
+        gid = (np.arange(len(W)) * groups) // len(W)
+    ids = np.unique(gid)
+    if len(ids) < 3:
+        return fit
+    est = np.array([fit_candidates(prob, list(fit.cands), init=fit.values, ci=False,
+                                   W=W.take(gid != g)).values for g in ids])
+    G = len(ids)
+    sd_jk = np.sqrt((G - 1) / G * np.sum((est - est.mean(0)) ** 2, 0))
+    shift = fit.shift if len(fit.shift) else np.zeros_like(fit.values)
+    fit.sd = np.sqrt(np.maximum(fit.sd ** 2, sd_jk ** 2 + shift ** 2))
+    q = float(student_t.ppf(0.975, G - 1))
+    fit.ci = np.stack([fit.values - q * fit.sd, fit.values + q * fit.sd], 1)
+    return fit
+
+
+def _jacobian(fun, x, r, lo, hi, scale):
+    """The transposed Jacobian [p, N] (rows contiguous: p x p products stay cheap)."""
+    Jt = np.empty((len(x), r.size))
+    for j in range(len(x)):
+        h = 1e-4 * scale[j]
+        if x[j] + h > hi[j]:
+            h = -h
+        xp = x.copy()
+        xp[j] += h
+        Jt[j] = (fun(xp) - r) / h
+    return Jt
+
+
+def levenberg_marquardt(fun, x0, lo, hi, scale, max_iter: int = 30):
+    """Bounded (projected) Levenberg-Marquardt for a few parameters and many residuals.
+    Returns (x, residuals at x, Jacobian at x). scipy's least_squares spends most of its
+    time on n_residuals-sized linear algebra; here every step is a p x p solve."""
+    x = np.asarray(x0, float).copy()
+    r = fun(x)
+    cost, mu = r @ r, 1e-3
+    Jt = _jacobian(fun, x, r, lo, hi, scale)
+    for _ in range(max_iter):
+        g, A = Jt @ r, Jt @ Jt.T
+        diag = np.maximum(np.diag(A), 1e-12 * (np.trace(A) + 1e-30))
+        improved = False
+        while mu < 1e10:
+            step = -np.linalg.solve(A + mu * np.diag(diag), g)
+            xn = np.clip(x + step, lo, hi)
+            rn = fun(xn)
+            cn = rn @ rn
+            if cn < cost:
+                improved = True
+                break
+            mu *= 8.0
+        if not improved:
+            break
+        done = (cost - cn) <= 1e-10 * cost or np.all(np.abs(xn - x) <= 1e-9 * scale)
+        x, r, cost, mu = xn, rn, cn, max(mu / 4.0, 1e-9)
+        Jt = _jacobian(fun, x, r, lo, hi, scale)
+        if done:
+            break
+    return x, r, Jt
+
+
+def _sandwich_sd(Jt, r, cl, W: Windows) -> np.ndarray:
+    p = Jt.shape[0]
+    per = Jt.shape[1] // len(W)
+    rw = r.reshape(len(W), per)
+    g = np.stack([np.sum(Jt[j].reshape(len(W), per) * rw, 1) for j in range(p)], 1)
+    C = cl.max() + 1
+    gc = np.zeros((C, p))
+    np.add.at(gc, cl, g)
+    bread = np.linalg.pinv(Jt @ Jt.T)
+    meat = gc.T @ gc * (C / max(C - 1, 1))
+    cov = bread @ meat @ bread
+    return np.sqrt(np.maximum(np.diag(cov), 0.0))
+
+
+def evaluate(prob: Problem, fit: Fit | None) -> tuple[float, int, np.ndarray]:
+    """Cross-validated SSR, residual count and per-cluster SSR (None = unmodified)."""
+    ssr, n, per_c = 0.0, 0, []
+    for k in prob.folds:
+        W = prob.test(k)
+        effects = [] if fit is None else fit.fold_effects(prob.spec, k)
+        r = prob.residuals(effects, W)
+        per_w = np.sum(r.reshape(len(W), -1) ** 2, 1)
+        ssr += float(per_w.sum())
+        n += r.size
+        per_c.append(np.bincount(prob.clusters(W), weights=per_w))
+    return ssr, n, np.concatenate(per_c) if per_c else np.zeros(0)
+
+
+def _score(ssr, n, p, horizon):
+    n_eff = max(n / horizon, 2.0)
+    return n_eff * np.log(max(ssr, 1e-300) / n) + p * np.log(n_eff)
+
+
+def paired_z(a: np.ndarray, b: np.ndarray) -> float:
+    """z of the mean per-cluster SSR reduction from a to b (positive = b better)."""
+    d = a - b
+    if len(d) < 2:
+        return 0.0
+    se = d.std(ddof=1) / np.sqrt(len(d))
+    return float(d.mean() / se) if se > 0 else (np.inf if d.mean() > 0 else 0.0)
+
+
+def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
+    ssr0, n, per0 = none_eval
+    fit.test_ssr, fit.test_n, fit.test_cluster_ssr = evaluate(prob, fit)
+    fit.score = _score(fit.test_ssr, n, fit.num_params, prob.horizon)
+    fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
+    fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
+    min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
+    fit.significant = bool(fit.score < _score(ssr0, n, 0, prob.horizon) - SCORE_MARGIN
+                           and fit.reduction >= min_red)
+    return fit
+
+
+def _choose(fits, equal_rel: float = 0.0):
+    sig = [f for f in fits if f.significant]
+    if not sig:
+        return None
+    best = min(sig, key=lambda f: f.score)
+    # equally good: within SCORE_MARGIN, or (models with a structural floor, equal_rel > 0)
+    # within a relative held-out SSR margin of the best
+    equal = [f for f in sig if f.score < best.score + SCORE_MARGIN
+             or f.test_ssr <= best.test_ssr * (1.0 + equal_rel)]
+    return min(equal, key=lambda f: (not f.physical, f.num_params, f.score))
+
+
+def select(prob: Problem, cands, progress=None, pairs: bool = True):
+    """Fit everything, choose. Returns (chosen Fit or None, all fits, none evaluation)."""
+    none_eval = evaluate(prob, None)
+    fits, by_cand = [], {}
+    for i, c in enumerate(cands):
+        init = None
+        if c.name == "r_comp":
+            init = np.array([by_cand[Candidate("contact_offset", p)].values[0]
+                             if Candidate("contact_offset", p) in by_cand else 0.0
+                             for p in prob.spec.pair_names])
+        f = widen_for_bias(prob, score_fit(prob, cv_fit(prob, [c], init), none_eval))
+        fits.append(f)
+        by_cand[c] = f
+        if progress:
+            progress.update(i + 1)
+    eligible = list(fits)
+    if pairs:
+        singles = sorted([f for f in fits if f.physical],
+                         key=lambda f: f.score)[:getattr(prob.spec, "pair_singles", 4)]
+        for a, b in combinations(singles, 2):
+            if a.cands[0].name == b.cands[0].name == "actuator_delay":
+                continue
+            init = np.concatenate([a.values, b.values])
+            f = score_fit(prob, cv_fit(prob, [a.cands[0], b.cands[0]], init), none_eval)
+            fits.append(f)
+            # a pair must explain clearly more than either of its effects alone
+            pair_red = getattr(prob.spec, "pair_reduction", PAIR_REDUCTION)
+            if f.test_ssr < (1 - pair_red) * min(a.test_ssr, b.test_ssr):
+                eligible.append(f)
+            if progress:
+                progress.update(len(fits))
+    chosen = _choose(eligible, getattr(prob.spec, "equal_reduction", 0.0))
+    if chosen is not None:
+        if not len(chosen.shift):
+            widen_for_bias(prob, chosen)
+        jackknife(prob, chosen)
+    return chosen, fits, none_eval

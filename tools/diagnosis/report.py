@@ -1,0 +1,317 @@
+"""report.json and report.html (with PNG plots, also embedded as base64) of `diagnose`."""
+from __future__ import annotations
+
+import base64
+import html
+import json
+from pathlib import Path
+
+import numpy as np
+
+from adaptive_c3.tools.diagnosis.effects import EFFECTS, rollout
+from adaptive_c3.tools.diagnosis.locate import LAG
+
+PLOT_ROLLOUT_STEPS = 40
+
+
+def _params(fit, spec):
+    out, i = [], 0
+    for c in fit.cands:
+        p = c.num_params(spec)
+        names, units = c.param_names(spec), c.units(spec)
+        out.append(dict(
+            name=c.name, target=c.target,
+            params=[dict(name=names[j], value=float(fit.values[i + j]), unit=units[j],
+                         ci95=[float(fit.ci[i + j, 0]), float(fit.ci[i + j, 1])],
+                         sd=float(fit.sd[i + j])) for j in range(p)]))
+        i += p
+    return out
+
+
+def candidate_rows(result) -> list:
+    spec = result["spec"]
+    rows = []
+    for f in sorted(result["fits"], key=lambda f: f.score):
+        effects = _params(f, spec)
+        row = dict(name=" + ".join(e["name"] for e in effects),
+                   target=" + ".join(e["target"] for e in effects),
+                   effects=effects,
+                   held_out_error=dict(normalised_rms=float(np.sqrt(f.test_ssr / f.test_n)),
+                                       ssr_reduction=float(f.reduction)),
+                   penalty_score=float(f.score), num_params=int(f.num_params),
+                   significant=bool(f.significant), physical=bool(f.physical),
+                   z_vs_none=float(f.z_vs_none))
+        if len(effects) == 1:
+            row["params"] = effects[0]["params"]
+        rows.append(row)
+    return rows
+
+
+def selected_rows(result) -> list:
+    chosen = result["chosen"]
+    if chosen is None:
+        return [{"name": "none"}]
+    out = []
+    for e in _params(chosen, result["spec"]):
+        e["held_out_error"] = dict(normalised_rms=float(np.sqrt(chosen.test_ssr / chosen.test_n)),
+                                   ssr_reduction=float(chosen.reduction))
+        e["penalty_score"] = float(chosen.score)
+        out.append(e)
+    return out
+
+
+def _fmt(v):
+    return f"{v:.3g}"
+
+
+def plain_summary(result, selected) -> str:
+    eb, ea = result["error_before"], result["error_after"]
+    rb, ra = eb["rollout"]["normalised_rms"], ea["rollout"]["normalised_rms"]
+    sb, sa = eb["one_step"]["normalised_rms"], ea["one_step"]["normalised_rms"]
+    units = ("(held-out: cross-validated over episodes; RMS in units of the noise floor, "
+             "where 1 means as good as the sensor noise allows)")
+    if selected[0]["name"] == "none":
+        best = min(result["fits"], key=lambda f: f.score, default=None)
+        tail = (f" The best candidate, {best.label()}, changed the held-out error by only "
+                f"{100 * best.reduction:.2g}%." if best is not None else "")
+        return (f"No effect in the library improves the held-out predictions beyond the noise "
+                f"floor: the model and the recording agree up to sensor noise (one-step error "
+                f"{_fmt(sb)}, {result['horizon']}-step rollout error {_fmt(rb)} {units})." + tail)
+    parts = []
+    for e in selected:
+        d = EFFECTS[e["name"]].description
+        vals = ", ".join(f"{_fmt(p['value'])} {p['unit']} (95% interval {_fmt(p['ci95'][0])} "
+                         f"to {_fmt(p['ci95'][1])})" for p in e["params"])
+        where = f" on {e['target']}" if e["target"] else ""
+        parts.append(f"{e['name'].replace('_', ' ')}{where} ({d}) of about {vals}")
+    ww = len(result["mismatch_windows"])
+    xb, xa = eb["rollout"]["excess_over_noise"], ea["rollout"]["excess_over_noise"]
+    return (f"The model leaves out {' and '.join(parts)}. Adding it cuts the held-out "
+            f"{result['horizon']}-step rollout error from {_fmt(rb)} to {_fmt(ra)} and the "
+            f"one-step error from {_fmt(sb)} to {_fmt(sa)} {units}; the rollout error above "
+            f"the noise floor goes from {_fmt(xb)} to {_fmt(xa)}. The recording and the "
+            f"model disagree beyond the noise floor in {ww} window(s) listed below.")
+
+
+# ------------------------------------------------------------------ plots
+def _plots(out: Path, rec, result) -> list:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    spec, W1, steps = result["spec"], result["W1"], result["steps"]
+    files = []
+    # 1. timeline of the episode with the most flagged steps
+    eps = np.unique(W1.episode)
+    ep = max(eps, key=lambda e: steps["flag"][W1.episode == e].sum())
+    sel = W1.episode == ep
+    t = W1.t0[sel]
+    shown = list(getattr(spec, "plot_idx", ()) or range(len(spec.state_names)))
+    n = len(shown)
+    fig, ax = plt.subplots(n + 2, 1, figsize=(10, 2.0 * (n + 2)), sharex=True)
+    flag = steps["flag"][sel]
+    for i, j in enumerate(shown):
+        ax[i].plot(t, W1.X0[sel, j], "k.", ms=2, label="recording")
+        ax[i].set_ylabel(spec.state_names[j])
+        for a, b in _runs(flag):
+            for k in range(n + 2):
+                ax[k].axvspan(t[a], t[b], color="orange", alpha=0.15, lw=0)
+    ax[n].semilogy(t, np.maximum(steps["score"][sel].max(1), 1e-2))
+    ax[n].axhline(4.0, color="r", ls="--", lw=0.8)
+    ax[n].set_ylabel("mismatch\n(noise units)")
+    mc, dc = steps["model_contact"][sel], steps["data_contact"][sel]
+    for i, pair in enumerate(spec.pair_names):
+        y = i
+        for mask, col, lab in ((mc[:, i] & dc[:, i], "tab:green", "both"),
+                               (mc[:, i] & ~dc[:, i], "tab:red", "model only"),
+                               (~mc[:, i] & dc[:, i], "tab:purple", "data only")):
+            ax[n + 1].plot(t[mask], np.full(mask.sum(), y), "|", color=col, ms=10,
+                           label=lab if i == 0 else None)
+    ax[n + 1].set_yticks(range(len(spec.pair_names)), spec.pair_names)
+    ax[n + 1].set_ylim(-0.8, len(spec.pair_names) - 0.2)
+    ax[n + 1].legend(loc="upper right", fontsize=7, ncol=3)
+    ax[n + 1].set_title("contact: model prediction vs inferred from the motion", fontsize=8)
+    ep_id = int(rec.episode[W1.row[sel][0]]) if rec.episode is not None else 0
+    ax[-1].set_xlabel(f"time in episode {ep_id} (s); shaded: mismatch beyond noise")
+    fig.tight_layout()
+    files.append(_save(fig, out / "timeline.png"))
+    plt.close(fig)
+    # 2. rollouts: recording vs original vs patched over longer horizons
+    starts = _rollout_starts(rec, result, 3)
+    if starts:
+        fig, ax = plt.subplots(n, len(starts), figsize=(4 * len(starts), 2.0 * n), squeeze=False)
+        for j, (row, length, fold) in enumerate(starts):
+            x0, U, Xr, tt = _segment(rec, row, length)
+            for tag, P, style in (("original model", result["P0"], "r--"),
+                                  ("patched model (fitted without this part)",
+                                   result["P1_folds"][fold], "b-")):
+                X, _ = rollout(P, x0[None], U[None], length, LAG, np.array([row]))
+                for i, k in enumerate(shown):
+                    ax[i, j].plot(tt[1:], X[0, :, k], style, lw=1.2, label=tag)
+            for i, k in enumerate(shown):
+                ax[i, j].plot(tt, Xr[:, k], "k.", ms=3, label="recording")
+                ax[i, 0].set_ylabel(spec.state_names[k])
+            ax[-1, j].set_xlabel("time (s)")
+        ax[0, 0].legend(fontsize=7)
+        fig.suptitle(f"open-loop rollouts from recorded states ({PLOT_ROLLOUT_STEPS} steps), "
+                     "patched model fitted on the other folds", fontsize=9)
+        fig.tight_layout()
+        files.append(_save(fig, out / "rollouts.png"))
+        plt.close(fig)
+    # 3. errors before / after
+    fig, ax = plt.subplots(1, 2, figsize=(9, 3))
+    for k, scope in enumerate(("overall", "inside mismatch windows")):
+        vals = []
+        for tag in ("before", "after"):
+            e = result["errors"][tag] if scope == "overall" else \
+                result["errors"][tag]["inside_mismatch_windows"]
+            vals.append([(e[m] or {}).get("normalised_rms", np.nan) for m in ("one_step", "rollout")])
+        vals = np.array(vals)
+        x = np.arange(2)
+        ax[k].bar(x - 0.2, vals[0], 0.4, label="original model", color="tab:red")
+        ax[k].bar(x + 0.2, vals[1], 0.4, label="patched model", color="tab:blue")
+        ax[k].axhline(1.0, color="k", ls=":", lw=0.8)
+        ax[k].set_xticks(x, ["one-step", f"{result['horizon']}-step rollout"])
+        ax[k].set_title(f"cross-validated error, {scope}", fontsize=9)
+        ax[k].set_ylabel("RMS / noise floor")
+    ax[0].legend(fontsize=7)
+    fig.tight_layout()
+    files.append(_save(fig, out / "errors.png"))
+    plt.close(fig)
+    # 4. candidates
+    fits = sorted([f for f in result["fits"] if len(f.cands) == 1], key=lambda f: -f.reduction)
+    fig, ax = plt.subplots(figsize=(8, 0.3 * len(fits) + 1))
+    chosen = result["chosen"]
+    cols = ["tab:blue" if chosen is not None and f.label() == chosen.label() else
+            ("tab:gray" if not f.significant else "tab:orange") for f in fits]
+    ax.barh([f.label() for f in fits], [100 * f.reduction for f in fits], color=cols)
+    ax.set_xlabel("cross-validated SSR reduction vs the original model (%)\n"
+                  "blue: selected, orange: significant, grey: not significant", fontsize=8)
+    ax.invert_yaxis()
+    ax.tick_params(labelsize=7)
+    fig.tight_layout()
+    files.append(_save(fig, out / "candidates.png"))
+    plt.close(fig)
+    return files
+
+
+def _runs(flag):
+    out, k = [], 0
+    while k < len(flag):
+        if flag[k]:
+            j = k
+            while j + 1 < len(flag) and flag[j + 1]:
+                j += 1
+            out.append((k, j))
+            k = j + 1
+        else:
+            k += 1
+    return out
+
+
+def _rollout_starts(rec, result, count):
+    """Starts in mismatch windows first, with PLOT_ROLLOUT_STEPS samples after, and fold."""
+    W1, fold1 = result["W1"], result["fold1"]
+    score = result["steps"]["score"].max(1)
+    ep_len = {e: len(idx) for e, (_, idx) in enumerate(rec.episodes())}
+    first = {e: idx[0] for e, (_, idx) in enumerate(rec.episodes())}
+    ok = [i for i in np.flatnonzero(fold1 >= 0)
+          if W1.row[i] - first[W1.episode[i]] + PLOT_ROLLOUT_STEPS < ep_len[W1.episode[i]]]
+    if not ok:
+        return []
+    ok = sorted(ok, key=lambda i: -score[i])
+    picked = []
+    for i in ok:
+        if all(abs(W1.row[i] - W1.row[j]) > 2 * PLOT_ROLLOUT_STEPS for j in picked):
+            picked.append(i)
+        if len(picked) == count:
+            break
+    return [(int(W1.row[i]), PLOT_ROLLOUT_STEPS, int(fold1[i])) for i in picked]
+
+
+def _segment(rec, row, length):
+    u = rec.u
+    hist = np.array([u[max(row - LAG + k, 0)] for k in range(LAG)])
+    ep = rec.episode
+    if ep is not None:  # do not take history from the previous episode
+        for k in range(LAG):
+            if row - LAG + k < 0 or ep[row - LAG + k] != ep[row]:
+                hist[k] = u[row]
+    U = np.concatenate([hist, u[row:row + length]], 0)
+    return rec.x[row], U, rec.x[row:row + length + 1], rec.t[row:row + length + 1]
+
+
+def _save(fig, path: Path) -> Path:
+    fig.savefig(path, dpi=90)
+    return path
+
+
+# ------------------------------------------------------------------ writing
+def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
+    spec = result["spec"]
+    selected = selected_rows(result)
+    report = dict(
+        model=spec.name, horizon_steps=result["horizon"], dt=spec.dt, split=result["split"],
+        scenario_effects=[dict(name=c.name, target=c.target, value=[float(v) for v in p])
+                          for c, p in result["base"]],
+        noise_floor={n: float(s) for n, s in zip(spec.state_names, result["sigma"])},
+        mismatch_windows=result["windows"],
+        mismatch_windows_total=int(result["steps"]["total_windows"]),
+        contact_agreement=result["contact"],
+        candidates=candidate_rows(result),
+        not_applicable=[dict(name=k, reason=v) for k, v in result["not_applicable"].items()],
+        selected=selected,
+        error_before=result["errors"]["before"], error_after=result["errors"]["after"],
+        patched_scenario="patched_scenario.yaml", patched_scenario_notes=list(scenario_notes),
+        seconds=float(result["seconds"]))
+    result["error_before"], result["error_after"] = report["error_before"], report["error_after"]
+    result["mismatch_windows"] = result["windows"]
+    report["summary"] = plain_summary(result, selected)
+    (out / "report.json").write_text(json.dumps(report, indent=1))
+    files = _plots(out, rec, result)
+    _write_html(out / "report.html", report, files)
+    return report
+
+
+def _write_html(path: Path, report: dict, files: list) -> None:
+    esc = html.escape
+    rows = "".join(
+        f"<tr><td>{esc(c['name'])}</td><td>{esc(c['target'])}</td><td>"
+        + "; ".join(f"{p['name']}={_fmt(p['value'])} {esc(p['unit'])} "
+                    f"[{_fmt(p['ci95'][0])}, {_fmt(p['ci95'][1])}]"
+                    for e in c["effects"] for p in e["params"])
+        + f"</td><td>{_fmt(c['held_out_error']['normalised_rms'])}</td>"
+        f"<td>{100 * c['held_out_error']['ssr_reduction']:.1f}%</td>"
+        f"<td>{c['penalty_score']:.1f}</td><td>{'yes' if c['significant'] else ''}</td></tr>"
+        for c in report["candidates"])
+    wins = "".join(
+        f"<tr><td>{w['episode']}</td><td>{w['start']:.2f}</td><td>{w['end']:.2f}</td>"
+        f"<td>{esc(', '.join(w['coordinates']))}</td><td>{esc(', '.join(w['contact_pairs']))}</td>"
+        f"<td>{esc(json.dumps(w['contact']))}</td></tr>" for w in report["mismatch_windows"])
+    na = "".join(f"<li><b>{esc(n['name'])}</b>: {esc(n['reason'])}</li>"
+                 for n in report["not_applicable"])
+    imgs = "".join(
+        f"<figure><img src='data:image/png;base64,{base64.b64encode(Path(f).read_bytes()).decode()}'"
+        f" style='max-width:100%'><figcaption>{esc(Path(f).name)}</figcaption></figure>"
+        for f in files)
+    path.write_text(f"""<!doctype html><html><head><meta charset="utf-8">
+<title>adaptive-c3 diagnose: {esc(report['model'])}</title>
+<style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}
+td,th{{border:1px solid #ccc;padding:2px 6px;font-size:12px}} table{{border-collapse:collapse}}</style>
+</head><body><h1>Model / recording mismatch: {esc(report['model'])}</h1>
+<p><b>{esc(report['summary'])}</b></p>
+<p>Noise floor estimated from the data (sensor noise std per state):
+{esc(json.dumps({k: float(f'{v:.3g}') for k, v in report['noise_floor'].items()}))}.
+Held-out data: {esc(report['split'])}. Patched scenario: patched_scenario.yaml
+({esc('; '.join(report['patched_scenario_notes']) or 'unchanged')}).</p>
+{imgs}
+<h2>Candidates (values fitted on all data; errors cross-validated: each part predicted by
+parameters fitted on the other parts)</h2>
+<table><tr><th>effect</th><th>target</th><th>value [95% interval]</th>
+<th>held-out RMS / noise</th><th>SSR reduction</th><th>penalised score</th><th>significant</th></tr>
+{rows}</table>
+<p>Not applicable to this model:</p><ul>{na}</ul>
+<h2>Mismatch windows ({report['mismatch_windows_total']} found, the worst
+{len(report['mismatch_windows'])} listed)</h2>
+<table><tr><th>episode</th><th>start (s)</th><th>end (s)</th><th>coordinates</th>
+<th>contact pairs</th><th>contact steps (both / model only / data only)</th></tr>{wins}</table>
+</body></html>""")

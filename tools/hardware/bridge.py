@@ -1,0 +1,350 @@
+"""`adaptive-c3 hardware SCENARIO --lcm-url URL`: the LCM bridge to a Franka driver.
+
+The controller side of the real experiment as its own diagram (the robot and the vision
+process are other processes on the LCM network):
+
+  PANDA_STATUS (lcmt_panda_status) -> PandaStatusReceiver -> q, v -> ImpedanceController
+      (-> ee.state, ee.commanded_force)
+  BALL_ESTIMATE (lcmt_robot_state) -> BallEstimateDecoder -> ball.position, ball.velocity
+  add_ball_rolling_controller (estimator, Anitescu LCS, residual learner, C3 planner)
+      -> ee.desired_state, ee.feedforward_force -> ImpedanceController
+  ImpedanceController.panda.torque_command -> PandaWatchdog (stale status > 50 ms,
+      malformed, torque + rate limits, latched stop on non-finite)
+      -> PandaCommandSender (kTorque) -> PANDA_COMMAND (lcmt_panda_command), every 1 ms
+
+Channels and types (the vision process must follow the BALL_ESTIMATE layout):
+  PANDA_STATUS   drake.lcmt_panda_status   from the Franka driver (7 joints)
+  PANDA_COMMAND  drake.lcmt_panda_command  torque mode: joint_torque (7, N m) WITHOUT
+                 gravity (the robot adds its own gravity compensation)
+  BALL_ESTIMATE  drake.lcmt_robot_state    num_joints = 6, joint_name = [ball_x, ball_y,
+                 ball_z, ball_vx, ball_vy, ball_vz], joint_position = the ball centre (m)
+                 and velocity (m/s) in the robot base frame (table top z = 0); utime =
+                 time of the estimate (us). Any other layout (names, count, non-finite)
+                 is ignored (NaN to the estimator, which then holds the plan).
+
+The simulator advances in real time (the diagram clock is the wall clock since start);
+the watchdog judges the status by its receive time on that clock, and also zeroes the
+command while the diagram clock lags the wall clock by more than --max-lag-ms (100 ms):
+a controller that cannot keep up would send late commands. --period (1 ms) is the
+command / watchdog period.
+
+Real-time caveat (measured on the 2 shared cores here): with the reference wrist gains
+(rotational stiffness 900, damping 20) the closed loop over LCM is sensitive to the
+command delay of a Python bridge (a few ms, more under CPU load): it oscillated and threw
+the ball off; with rotational damping 5 / stiffness 200 it rolled the ball 0.13 m. The
+reference runs the 1 kHz impedance loop in its own (C++) process and C3 apart from it. `--log FILE` writes
+every LCM message seen (an LCM event log, readable by `adaptive-c3 record convert`).
+
+`run_loopback` runs this bridge and tools/hardware/sim_driver.py in ONE process over memq://,
+advancing both in lock-step (as fast as the CPU allows, deterministic): the end-to-end
+test of the bridge through LCM alone (`--loopback` on the command line).
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import dataclass
+
+import numpy as np
+from pydrake.common.value import AbstractValue
+from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.primitives import VectorLogSink
+
+from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, COMMAND_CHANNEL, NQ,
+                                                   STATUS_CHANNEL, decode_ball_estimate,
+                                                   fast_drake_lcm_copies, open_lcm)
+
+
+class BallEstimateDecoder(LeafSystem):
+    """lcmt_robot_state (BALL_ESTIMATE layout) -> ball.position (3), ball.velocity (3).
+
+    Every `period` s it takes the subscriber's newest message if it fits the layout
+    (finite, 6 named values) and holds it; before the first valid message it outputs
+    `prior` (the scenario's start position, at rest). Messages of another layout are
+    counted and ignored. (The controller's LCS refuses non-finite states, so the
+    decoder never outputs NaN.)"""
+
+    def __init__(self, prior, period: float = 1e-3):
+        super().__init__()
+        from drake import lcmt_robot_state
+        self._in = self.DeclareAbstractInputPort("lcmt_robot_state",
+                                                 AbstractValue.Make(lcmt_robot_state()))
+        # [p (3), v (3), valid messages, ignored messages, last utime]
+        self._xd = self.DeclareDiscreteState(np.r_[np.asarray(prior, float), np.zeros(3),
+                                                   0.0, 0.0, -1.0])
+        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
+        ticket = {self.xd_ticket()}
+        self.DeclareVectorOutputPort("ball.position", 3, lambda c, o: o.SetFromVector(self._s(c)[:3]),
+                                     prerequisites_of_calc=ticket)
+        self.DeclareVectorOutputPort("ball.velocity", 3, lambda c, o: o.SetFromVector(self._s(c)[3:6]),
+                                     prerequisites_of_calc=ticket)
+
+    def _s(self, context):
+        return context.get_discrete_state(self._xd).get_value()
+
+    def _update(self, context, discrete_state):
+        s = self._s(context).copy()
+        msg = self._in.Eval(context)
+        if msg.num_joints > 0 and float(msg.utime) != s[8]:
+            s[8] = float(msg.utime)
+            v = decode_ball_estimate(msg)
+            if np.all(np.isfinite(v)):
+                s[:6], s[6] = v, s[6] + 1
+            else:
+                s[7] += 1
+        discrete_state.get_mutable_vector(self._xd).set_value(s)
+
+    def counts(self, context) -> dict:
+        s = self._s(context)
+        return {"ball_messages": int(s[6]), "ball_messages_ignored": int(s[7])}
+
+
+class FiniteOr(LeafSystem):
+    """Passes a vector through, or `fallback` if it has a non-finite entry (stateless):
+    keeps the controller's pipeline finite; the watchdog latches the stop itself."""
+
+    def __init__(self, fallback):
+        super().__init__()
+        self._fb = np.asarray(fallback, float)
+        self._in = self.DeclareVectorInputPort("u", self._fb.size)
+        self.DeclareVectorOutputPort("y", self._fb.size, self._calc)
+
+    def _calc(self, context, output):
+        x = self._in.Eval(context)
+        output.SetFromVector(x if np.all(np.isfinite(x)) else self._fb)
+
+
+@dataclass
+class HardwareBridge:
+    diagram: object
+    watchdog: object
+    controller: object       # BallRollingController
+    logs: dict               # name -> VectorLogSink
+    ball: object             # BallEstimateDecoder
+
+
+def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: float = 0.05,
+                          rate_limit: float = 1000.0, log_period: float = 0.01,
+                          max_lag_s: float = math.inf) -> HardwareBridge:
+    """The bridge diagram (module doc). max_lag_s < inf: the watchdog also compares the
+    diagram clock with the wall clock (real-time runs) and zeroes the command while the
+    controller lags by more than that."""
+    from drake import lcmt_panda_command, lcmt_panda_status, lcmt_robot_state
+    from pydrake.manipulation import (PandaCommandSender, PandaControlMode,
+                                      PandaStatusReceiver)
+    from pydrake.systems.lcm import (LcmInterfaceSystem, LcmPublisherSystem,
+                                     LcmSubscriberSystem)
+    from pydrake.systems.primitives import Multiplexer
+
+    from adaptive_c3.diagrams.ball_rolling import (add_ball_rolling_controller,
+                                                   make_impedance_controller)
+    from adaptive_c3.systems.franka.panda_watchdog import PandaWatchdog, WatchdogConfig
+
+    fast_drake_lcm_copies()
+    builder = DiagramBuilder()
+    builder.AddSystem(LcmInterfaceSystem(lcm))
+    # the status twice: C++-decoded for Drake's receiver, Python-decoded for the watchdog
+    status_cpp = builder.AddSystem(LcmSubscriberSystem.Make(
+        STATUS_CHANNEL, lcmt_panda_status, lcm, use_cpp_serializer=True))
+    status_py = builder.AddSystem(LcmSubscriberSystem.Make(
+        STATUS_CHANNEL, lcmt_panda_status, lcm))
+    status_py.set_name(f"LcmSubscriberSystem({STATUS_CHANNEL}, python)")
+    receiver = builder.AddSystem(PandaStatusReceiver(NQ))
+    builder.Connect(status_cpp.get_output_port(), receiver.get_input_port())
+    mux = builder.AddSystem(Multiplexer([NQ, NQ]))
+    builder.Connect(receiver.GetOutputPort("position_measured"), mux.get_input_port(0))
+    builder.Connect(receiver.GetOutputPort("velocity_measured"), mux.get_input_port(1))
+
+    imp = s.impedance
+    ctrl = builder.AddSystem(make_impedance_controller(s))
+    finite = builder.AddSystem(FiniteOr(np.r_[np.asarray(imp.q_null, float), np.zeros(NQ)]))
+    builder.Connect(mux.get_output_port(), finite.get_input_port())
+    builder.Connect(finite.get_output_port(), ctrl.GetInputPort("panda.state"))
+
+    ball_sub = builder.AddSystem(LcmSubscriberSystem.Make(BALL_CHANNEL, lcmt_robot_state, lcm))
+    from adaptive_c3.diagrams.ball_rolling import ball_start_xy
+    ball = builder.AddSystem(BallEstimateDecoder(np.r_[ball_start_xy(s), s.model.ball_radius],
+                                                 period=max(command_period, 2e-3)))
+    builder.Connect(ball_sub.get_output_port(), ball.get_input_port())
+
+    c = add_ball_rolling_controller(builder, s, ctrl.GetOutputPort("ee.state"),
+                                    ctrl.GetOutputPort("ee.commanded_force"),
+                                    ball.GetOutputPort("ball.position"),
+                                    ball.GetOutputPort("ball.velocity"))
+    builder.Connect(c.ee_desired_state, ctrl.GetInputPort("ee.desired_state"))
+    builder.Connect(c.ee_feedforward_force, ctrl.GetInputPort("ee.feedforward_force"))
+
+    wd = builder.AddSystem(PandaWatchdog(
+        WatchdogConfig(stale_s=stale_s, rate_limit=rate_limit, max_lag_s=max_lag_s),
+        period=command_period, wall_clock=math.isfinite(max_lag_s)))
+    builder.Connect(status_py.get_output_port(), wd.GetInputPort("panda.status"))
+    builder.Connect(ctrl.GetOutputPort("panda.torque_command"),
+                    wd.GetInputPort("panda.torque_request"))
+    sender = builder.AddSystem(PandaCommandSender(NQ, PandaControlMode.kTorque))
+    builder.Connect(wd.GetOutputPort("panda.torque_command"), sender.GetInputPort("torque"))
+    pub = builder.AddSystem(LcmPublisherSystem.Make(
+        COMMAND_CHANNEL, lcmt_panda_command, lcm, command_period, use_cpp_serializer=True))
+    builder.Connect(sender.get_output_port(), pub.get_input_port())
+
+    logs = {}
+    for name, port in (("lcs_state", c.lcs_state), ("ee_force", ctrl.GetOutputPort("ee.commanded_force")),
+                       ("tau", wd.GetOutputPort("panda.torque_command")),
+                       ("fault", wd.GetOutputPort("watchdog.fault")),
+                       ("r_comp", c.r_comp)):   # at the planning dt, as in simulation
+        sink = builder.AddSystem(VectorLogSink(port.size(), log_period))
+        sink.set_name(f"log_{name}")
+        builder.Connect(port, sink.get_input_port())
+        logs[name] = sink
+    diagram = builder.Build()
+    diagram.set_name(f"lcm_bridge[{s.name}]")
+    return HardwareBridge(diagram, wd, c, logs, ball)
+
+
+class LcmRecorder:
+    """Writes every message seen on `lcm` to an LCM event log (tools/hardware/record_convert.py).
+    `clock()` gives the event timestamps in seconds (wall clock by default)."""
+
+    def __init__(self, lcm, path, clock=None):
+        from adaptive_c3.tools.user_input import UserError
+        from adaptive_c3.tools.hardware.record_convert import LcmLogWriter
+        try:
+            self._writer = LcmLogWriter(path)
+        except OSError as e:
+            raise UserError(f"cannot write the LCM log {path}: {e.strerror}")
+        self._clock = clock or time.time
+        lcm.SubscribeAllChannels(self._on)
+
+    def _on(self, channel, data):
+        self._writer.write(int(round(self._clock() * 1e6)), channel, bytes(data))
+
+    def close(self):
+        self._writer.close()
+
+
+def run_loopback(s, duration: float, *, stop_driver_at: float | None = None,
+                 log_path=None, step: float = 1e-3, command_period: float = 1e-3,
+                 stale_s: float = 0.05) -> dict:
+    """Bridge + simulated driver in one process over memq://, in lock-step.
+
+    Every `step` of simulated time: advance the driver (it publishes the status /
+    ball estimate), then the bridge (it reads them and publishes its command), so each
+    side sees the other's newest message. From `stop_driver_at` on, the driver is no
+    longer advanced (as if killed) while the bridge goes on: the result tells when the
+    bridge's command became zero. Returns a summary dict (and the handles under "_")."""
+    from pydrake.lcm import DrakeLcm
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
+
+    lcm = DrakeLcm("memq://")
+    drv = build_sim_driver(s, lcm)
+    bridge = build_hardware_bridge(s, lcm, command_period=command_period, stale_s=stale_s)
+    clock = {"t": 0.0}
+    rec = LcmRecorder(lcm, log_path, clock=lambda: clock["t"]) if log_path else None
+    sim_d, sim_b = Simulator(drv.diagram), Simulator(bridge.diagram)
+    sim_d.Initialize()
+    sim_b.Initialize()
+    cmds = []   # (t, |tau|_inf) of each command the bridge published, seen from outside
+
+    def on_cmd(data):
+        from drake import lcmt_panda_command
+        msg = lcmt_panda_command.decode(data)
+        cmds.append((clock["t"], float(np.max(np.abs(msg.joint_torque))) if msg.joint_torque else 0.0))
+    lcm.Subscribe(COMMAND_CHANNEL, on_cmd)
+    n = int(round(duration / step))
+    wall = time.perf_counter()
+    driver_alive = True
+    for k in range(1, n + 1):
+        t = k * step
+        clock["t"] = t
+        if stop_driver_at is not None and t > stop_driver_at + 1e-12:
+            driver_alive = False
+        if driver_alive:
+            sim_d.AdvanceTo(t)
+        sim_b.AdvanceTo(t)
+        lcm.HandleSubscriptions(0)
+    wall = time.perf_counter() - wall
+    if rec:
+        rec.close()
+    ctx_b = sim_b.get_context()
+    wd_ctx = bridge.watchdog.GetMyContextFromRoot(ctx_b)
+    out = {"sim_duration_s": duration, "wall_s": wall,
+           "driver": driver_summary(drv, sim_d.get_context()),
+           "watchdog": bridge.watchdog.report(wd_ctx),
+           **bridge.ball.counts(bridge.ball.GetMyContextFromRoot(ctx_b))}
+    if stop_driver_at is not None:
+        after = [(t, a) for t, a in cmds if t > stop_driver_at]
+        zero_t = next((t for t, a in after if a == 0.0), None)
+        out["driver_stopped_at_s"] = stop_driver_at
+        out["command_zero_after_s"] = None if zero_t is None else zero_t - stop_driver_at
+        out["nonzero_commands_after_zero"] = sum(1 for t, a in after
+                                                 if zero_t is not None and t > zero_t and a != 0)
+    out["commands_published"] = len(cmds)
+    out["_"] = {"driver": drv, "bridge": bridge, "sim_driver": sim_d, "sim_bridge": sim_b}
+    return out
+
+
+def _load(args):
+    from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
+    from adaptive_c3.tools.user_input import UserError, resolve_scenario_path
+    s, text = load_scenario(resolve_scenario_path(args.scenario), list(getattr(args, "set", None) or []))
+    if s.task != "ball_rolling":
+        raise ScenarioError(f"hardware needs a ball_rolling scenario, got task '{s.task}'")
+    if s.robot != "panda":
+        raise ScenarioError("hardware needs robot: panda (the bridge speaks lcmt_panda_*)")
+    duration = args.duration if args.duration is not None else None
+    if duration is not None and not (math.isfinite(duration) and duration > 0):
+        raise UserError(f"--duration must be > 0, got {duration}")
+    if not (math.isfinite(args.stale_ms) and args.stale_ms > 0):
+        raise UserError(f"--stale-ms must be > 0, got {args.stale_ms}")
+    if not (args.max_lag_ms > 0):
+        raise UserError(f"--max-lag-ms must be > 0, got {args.max_lag_ms}")
+    if not (math.isfinite(args.period) and 1e-4 <= args.period <= 0.01):
+        raise UserError(f"--period must be in [0.0001, 0.01] s, got {args.period}")
+    return s, text, duration
+
+
+def cmd_hardware(args) -> int:
+    from pydrake.systems.analysis import Simulator
+    s, _, duration = _load(args)
+    stale_s = args.stale_ms * 1e-3
+    if args.loopback:
+        out = run_loopback(s, duration or s.sim_duration_s, log_path=args.log, stale_s=stale_s)
+        out.pop("_")
+        print(json.dumps(out, default=float), flush=True)
+        return 0
+    if not args.lcm_url:
+        from adaptive_c3.tools.user_input import UserError
+        raise UserError("--lcm-url is required (or --loopback)")
+    lcm = open_lcm(args.lcm_url)
+    bridge = build_hardware_bridge(s, lcm, stale_s=stale_s, command_period=args.period,
+                                   max_lag_s=args.max_lag_ms * 1e-3)
+    rec = LcmRecorder(lcm, args.log) if args.log else None
+    sim = Simulator(bridge.diagram)
+    sim.set_target_realtime_rate(1.0)
+    sim.Initialize()
+    print(f"hardware: bridge on {args.lcm_url}: {STATUS_CHANNEL} + {BALL_CHANNEL} -> "
+          f"{COMMAND_CHANNEL}; watchdog {args.stale_ms:g} ms"
+          + (f"; for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
+    ctx = sim.get_context()
+    wd_ctx = bridge.watchdog.GetMyContextFromRoot(ctx)
+    start = time.perf_counter()
+    t = 0.0
+    try:
+        while duration is None or t < duration - 1e-12:
+            t = t + 0.1 if duration is None else min(t + 0.1, duration)
+            sim.AdvanceTo(t)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        if rec:
+            rec.close()
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": time.perf_counter() - start,
+           "watchdog": bridge.watchdog.report(wd_ctx)}
+    print(json.dumps(out, default=float), flush=True)
+    return 0
+
+
+__all__ = ["build_hardware_bridge", "cmd_hardware", "run_loopback", "HardwareBridge",
+           "BallEstimateDecoder", "LcmRecorder"]

@@ -1,0 +1,98 @@
+"""The LCM layout the bridge, the simulated driver and `record convert` share.
+
+Channels: PANDA_STATUS (drake.lcmt_panda_status), PANDA_COMMAND (drake.lcmt_panda_command,
+joint torques in N m without gravity) and BALL_ESTIMATE (drake.lcmt_robot_state in the
+BALL_ESTIMATE_NAMES layout: ball centre in m and velocity in m/s, robot base frame, table
+top z = 0). Also: opening an LCM URL with a one-line error, cheap message copies.
+"""
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+STATUS_CHANNEL = "PANDA_STATUS"
+COMMAND_CHANNEL = "PANDA_COMMAND"
+BALL_CHANNEL = "BALL_ESTIMATE"
+BALL_ESTIMATE_NAMES = ("ball_x", "ball_y", "ball_z", "ball_vx", "ball_vy", "ball_vz")
+NQ = 7
+
+
+def fast_lcm_copies(*types) -> None:
+    """Give lcm-gen Python message classes a cheap __deepcopy__ (encode + decode).
+
+    LcmSubscriberSystem keeps the newest message in abstract state, which Drake clones
+    (copy.deepcopy) on every unrestricted update; the generic deepcopy of a message with
+    several lists costs ~100 us, encode/decode a few us."""
+    for cls in types:
+        if "__deepcopy__" not in cls.__dict__:
+            cls.__deepcopy__ = _encode_decode_copy
+
+
+def _encode_decode_copy(msg, memo):
+    """A copy through the wire format; field by field if the message cannot be encoded
+    (e.g. its arrays do not match its counts - such a message is still copyable)."""
+    try:
+        return type(msg).decode(msg.encode())
+    except Exception:
+        import copy
+        new = type(msg)()
+        for name in type(msg).__slots__:
+            setattr(new, name, copy.deepcopy(getattr(msg, name), memo))
+        return new
+
+
+def fast_drake_lcm_copies():
+    from drake import lcmt_panda_command, lcmt_panda_status, lcmt_robot_state
+    fast_lcm_copies(lcmt_panda_command, lcmt_panda_status, lcmt_robot_state)
+
+
+def decode_ball_estimate(msg) -> np.ndarray:
+    """(6) [p, v] from a BALL_ESTIMATE message, all NaN if it does not fit the layout."""
+    try:
+        if (msg.num_joints == len(BALL_ESTIMATE_NAMES)
+                and tuple(msg.joint_name) == BALL_ESTIMATE_NAMES):
+            v = np.asarray(msg.joint_position, float)
+            if v.shape == (6,) and np.all(np.isfinite(v)):
+                return v
+    except (TypeError, ValueError):
+        pass
+    return np.full(6, np.nan)
+
+
+def open_lcm(url: str):
+    """A DrakeLcm on `url`, or a UserError for a URL LCM cannot open."""
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.tools.user_input import UserError
+    if not url or "://" not in url:
+        raise UserError(f"bad --lcm-url '{url}': expected e.g. udpm://239.255.76.67:7667?ttl=0 "
+                        "or memq://")
+    provider = url.split("://", 1)[0]
+    if provider not in ("udpm", "memq"):
+        raise UserError(f"bad --lcm-url '{url}': unknown LCM provider '{provider}'")
+    if provider == "udpm":
+        import ipaddress
+        import re
+        m = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
+        try:
+            ok = bool(m) and ipaddress.ip_address(m.group(1)).is_multicast and 0 < int(m.group(2)) < 65536
+        except ValueError:
+            ok = False
+        if not ok:
+            raise UserError(f"bad --lcm-url '{url}': expected udpm://MULTICAST_IP:PORT[?ttl=N]")
+    try:
+        lcm = DrakeLcm(url)
+    except Exception as e:
+        raise UserError(f"cannot open LCM at '{url}': {' '.join(str(e).split())}")
+    # LCM reports a bad URL on stderr only: check that a message gets through
+    got = []
+    probe = "ADAPTIVE_C3_PROBE"
+    lcm.Subscribe(probe, got.append)
+    lcm.Publish(probe, b"probe")
+    deadline = time.monotonic() + 1.0
+    while not got and time.monotonic() < deadline:
+        lcm.HandleSubscriptions(50)
+    if not got:
+        raise UserError(f"cannot send/receive on LCM at '{url}'")
+    return lcm
