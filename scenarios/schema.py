@@ -17,7 +17,8 @@ from typing import List
 import yaml
 from pydrake.common.yaml import yaml_load_typed
 
-from adaptive_c3.scenarios import ball_rolling_schema, cartpole_schema  # noqa: F401 (register their tasks)
+from adaptive_c3.scenarios import (ball_rolling_schema, cartpole_schema,  # noqa: F401 (they
+                                    rigid_object_schema)                 # register their tasks)
 from adaptive_c3.scenarios.common import TASKS, ScenarioError
 
 SCENARIO_DIR = Path(__file__).resolve().parent

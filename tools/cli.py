@@ -108,6 +108,19 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--out", default=None)
     diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnosis.diagnose", "cmd_diagnose"))
 
+    ev = sub.add_parser("evaluate", help="open-loop rollouts of a scenario's model against a recording",
+                        description="Rolls the scenario's model out from every episode's first state "
+                        "and reports position (%% of the object's size) and orientation (deg) errors; "
+                        "writes evaluate.json and evaluate.png.")
+    ev.add_argument("recording")
+    ev.add_argument("--scenario", required=True)
+    ev.add_argument("--out", default=None, help="output folder (default runs/evaluate)")
+    ev.add_argument("--baseline", choices=["drake"], default=None,
+                    help="also run Drake's own simulation of the scenario (SAP)")
+    ev.add_argument("--episodes", default=None, help="episode ids, e.g. 0-99,120 (default: all)")
+    ev.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
+    ev.set_defaults(func=_delegate("adaptive_c3.tools.diagnosis.evaluate", "cmd_evaluate"))
+
     hw = sub.add_parser(
         "hardware", help="LCM bridge to a real Franka driver",
         description="The controller side over LCM: subscribes PANDA_STATUS (lcmt_panda_status) "

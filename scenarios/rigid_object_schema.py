@@ -1,0 +1,102 @@
+"""Schema of the rigid-object scenarios (a free body tossed onto a table, no input).
+
+Registered with the scenario loader under `task: rigid_object`. The model is the
+Anitescu LCS of a MultibodyPlant (models/rigid_object.py): the object's corners (small
+spheres) against the table's half space, at the recording's time step. `patch` holds
+the effects `diagnose` may add to that model; all zero / one means the plain rigid model.
+"""
+import dataclasses as dc
+import math
+from typing import List
+
+from adaptive_c3.scenarios.common import ScenarioError, register_task
+
+
+@dc.dataclass
+class RigidBodySpec:
+    """The object: a box of box_size (m, body x, y, z) with its centre of mass at the
+    box centre; inertia_diag (kg m^2, body frame) empty means a solid box of that mass."""
+    box_size: List[float] = dc.field(default_factory=lambda: [0.1048, 0.1048, 0.1048])
+    mass: float = 0.37               # kg
+    inertia_diag: List[float] = dc.field(default_factory=list)
+
+
+@dc.dataclass
+class ContactModel:
+    """The rigid model's contact: corner spheres against the table's half space."""
+    table_height: float = 0.0        # m, table top in world z
+    friction: float = 0.18           # mu (the ContactNets authors' estimate for the cube)
+    friction_edges: int = 4          # n_e per corner
+    eps_c: float = 1.0e-3            # Anitescu regulariser, 1/kg (F positive definite)
+    corner_radius: float = 1.0e-3    # m, the corner spheres (their surface reaches the corner)
+    dt: float = 0.0                  # LCS step, s; 0 = the recording's step
+
+
+@dc.dataclass
+class ModelPatch:
+    """Effects added to the rigid model (what `diagnose` fits; 0 / 1 = none)."""
+    table_offset: float = 0.0        # m, added to table_height
+    size_offset: float = 0.0         # m, added to each box edge's half-width
+    restitution: float = 0.0         # Newton restitution of the normal approach speed
+    mass_scale: float = 1.0          # scales mass and inertia together
+    inertia_scale: float = 1.0       # scales the inertia only
+    r_comp: List[float] = dc.field(default_factory=list)  # additive complementarity residual
+
+
+@dc.dataclass
+class DrakeBaseline:
+    """Drake's own MultibodyPlant simulation of the scenario (`evaluate --baseline drake`)."""
+    time_step: float = 0.0           # s; 0 = the recording's step
+    point_stiffness: float = 0.0     # N/m; 0 = Drake's default
+    hunt_crossley_dissipation: float = -1.0   # s/m; < 0 = Drake's default
+    friction: float = -1.0           # < 0 = contact.friction
+
+
+@dc.dataclass
+class RigidObjectScenario:
+    task: str = "rigid_object"
+    name: str = "rigid_object"
+    body: RigidBodySpec = dc.field(default_factory=RigidBodySpec)
+    contact: ContactModel = dc.field(default_factory=ContactModel)
+    patch: ModelPatch = dc.field(default_factory=ModelPatch)
+    drake: DrakeBaseline = dc.field(default_factory=DrakeBaseline)
+    seed: int = 0
+
+
+def validate_rigid_object(s: RigidObjectScenario) -> None:
+    def need(cond, msg):
+        if not cond:
+            raise ScenarioError(msg)
+
+    def finite(v):
+        return isinstance(v, (int, float)) and math.isfinite(v)
+
+    b, c, p, d = s.body, s.contact, s.patch, s.drake
+    need(len(b.box_size) == 3 and all(finite(v) and v > 0 for v in b.box_size),
+         f"body.box_size must be 3 lengths > 0, got {b.box_size}")
+    need(finite(b.mass) and b.mass > 0, f"body.mass must be > 0, got {b.mass}")
+    need(len(b.inertia_diag) in (0, 3) and all(finite(v) and v > 0 for v in b.inertia_diag),
+         f"body.inertia_diag must be empty or 3 values > 0, got {b.inertia_diag}")
+    need(finite(c.table_height), "contact.table_height must be finite")
+    need(finite(c.friction) and c.friction >= 0, f"contact.friction must be >= 0, got {c.friction}")
+    need(c.friction_edges >= 2, f"contact.friction_edges must be >= 2, got {c.friction_edges}")
+    need(finite(c.eps_c) and c.eps_c > 0, f"contact.eps_c must be > 0, got {c.eps_c}")
+    need(finite(c.corner_radius) and 0 < c.corner_radius < min(b.box_size) / 2,
+         f"contact.corner_radius must be in (0, half the smallest edge), got {c.corner_radius}")
+    need(finite(c.dt) and c.dt >= 0, f"contact.dt must be >= 0 (0: the recording's), got {c.dt}")
+    need(finite(p.table_offset) and abs(p.table_offset) < 0.1, "patch.table_offset must be within 0.1 m")
+    need(finite(p.size_offset) and min(b.box_size) / 2 + p.size_offset > c.corner_radius,
+         f"patch.size_offset leaves no box, got {p.size_offset}")
+    need(finite(p.restitution) and 0 <= p.restitution <= 1,
+         f"patch.restitution must be in [0, 1], got {p.restitution}")
+    for key in ("mass_scale", "inertia_scale"):
+        v = getattr(p, key)
+        need(finite(v) and v > 0, f"patch.{key} must be > 0, got {v}")
+    need(all(finite(v) for v in p.r_comp), "patch.r_comp must be finite")
+    need(finite(d.time_step) and d.time_step >= 0, f"drake.time_step must be >= 0, got {d.time_step}")
+    need(finite(d.point_stiffness) and d.point_stiffness >= 0, "drake.point_stiffness must be >= 0")
+    need(finite(d.hunt_crossley_dissipation), "drake.hunt_crossley_dissipation must be finite")
+    need(finite(d.friction), "drake.friction must be finite")
+
+
+register_task("rigid_object", RigidObjectScenario, validate_rigid_object)
