@@ -76,9 +76,10 @@ class RigidObjectPlant:
 
 def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
                              point_stiffness: float | None = None,
-                             hunt_crossley_dissipation: float | None = None,
+                             relaxation_time: float | None = None,
                              friction: float | None = None) -> RigidObjectPlant:
-    """The box + table plant. time_step 0: continuous (for the linearizer); > 0: SAP."""
+    """The box + table plant. time_step 0: continuous (for the linearizer); > 0: SAP.
+    point_stiffness (N/m) and relaxation_time (s, SAP's dissipation) None: Drake's defaults."""
     builder = DiagramBuilder()
     config = MultibodyPlantConfig(time_step=float(time_step), contact_model="point",
                                   discrete_contact_approximation="sap" if time_step > 0 else "")
@@ -86,8 +87,9 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     plant.set_name("rigid_object_plant")
     mu = params.friction if friction is None else float(friction)
     props = ProximityProperties()
-    AddContactMaterial(props, dissipation=hunt_crossley_dissipation,
-                       point_stiffness=point_stiffness, friction=CoulombFriction(mu, mu))
+    AddContactMaterial(props, point_stiffness=point_stiffness, friction=CoulombFriction(mu, mu))
+    if relaxation_time is not None:
+        props.AddProperty("material", "relaxation_time", float(relaxation_time))
 
     unit = UnitInertia(*(np.asarray(params.inertia_diag) / params.mass))
     body = plant.AddRigidBody(BODY_NAME, SpatialInertia(params.mass, np.zeros(3), unit))

@@ -48,7 +48,7 @@ class DrakeBaseline:
     """Drake's own MultibodyPlant simulation of the scenario (`evaluate --baseline drake`)."""
     time_step: float = 0.0           # s; 0 = the recording's step
     point_stiffness: float = 0.0     # N/m; 0 = Drake's default
-    hunt_crossley_dissipation: float = -1.0   # s/m; < 0 = Drake's default
+    relaxation_time: float = 0.0     # s, SAP's dissipation time scale; 0 = Drake's default
     friction: float = -1.0           # < 0 = contact.friction
 
 
@@ -95,7 +95,7 @@ def validate_rigid_object(s: RigidObjectScenario) -> None:
     need(all(finite(v) for v in p.r_comp), "patch.r_comp must be finite")
     need(finite(d.time_step) and d.time_step >= 0, f"drake.time_step must be >= 0, got {d.time_step}")
     need(finite(d.point_stiffness) and d.point_stiffness >= 0, "drake.point_stiffness must be >= 0")
-    need(finite(d.hunt_crossley_dissipation), "drake.hunt_crossley_dissipation must be finite")
+    need(finite(d.relaxation_time) and d.relaxation_time >= 0, "drake.relaxation_time must be >= 0")
     need(finite(d.friction), "drake.friction must be finite")
 
 
