@@ -106,6 +106,16 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("recording")
     diag.add_argument("--scenario", required=True)
     diag.add_argument("--out", default=None)
+    diag.add_argument("--baseline", choices=["drake"], default=None,
+                      help="rigid_object: also Drake's SAP simulation on the held-out episodes, "
+                      "as it is and tuned on the fit episodes")
+    diag.add_argument("--held-out", type=float, default=0.3,
+                      help="rigid_object: fraction of episodes held out (default 0.3)")
+    diag.add_argument("--fit-episodes", type=int, default=30,
+                      help="rigid_object: at most this many episodes to fit on (default 30)")
+    diag.add_argument("--workers", type=int, default=2, help="rigid_object: processes (default 2)")
+    diag.add_argument("--effects", default=None,
+                      help="rigid_object: comma-separated effects to try (default: the whole library)")
     diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnosis.diagnose", "cmd_diagnose"))
 
     ev = sub.add_parser("evaluate", help="open-loop rollouts of a scenario's model against a recording",

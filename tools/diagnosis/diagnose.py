@@ -7,7 +7,8 @@ DIR/report.json, DIR/report.html (+ PNG plots), DIR/patched_scenario.yaml.
 
 Tasks: cartpole (a constant LCS) and ball_rolling (the controller model's Anitescu LCS
 linearised at every recording sample, tools/diagnosis/effects_ball.py; the recording
-must be sampled at 100 Hz).
+must be sampled at 100 Hz). rigid_object scenarios (free bodies tossed onto a table, many
+episodes, full open-loop rollouts) are diagnosed by tools/diagnosis/rigid_diagnose.py.
 
 Patched scenarios: where an effect maps onto a scenario key it sets the key
 (contact_offset -> model.wall_offset_error, contact_stiffness -> model.wall_stiffness;
@@ -272,6 +273,9 @@ def cmd_diagnose(args) -> int:
     from adaptive_c3.tools.diagnosis.report import write_report
     rec = load_recording(args.recording)
     scenario, text, base = load_scenario_with_effects(resolve_scenario_path(args.scenario))
+    if scenario.task == "rigid_object":
+        from adaptive_c3.tools.diagnosis.rigid_diagnose import cmd_diagnose_rigid
+        return cmd_diagnose_rigid(args, scenario, text, rec)
     spec = model_spec(scenario)
     check_recording(rec, spec)
     out = Path(args.out) if args.out else Path("runs") / (
