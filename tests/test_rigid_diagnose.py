@@ -3,7 +3,6 @@ pipeline on Drake SAP tosses with known physics the model's scenario does not ha
 from __future__ import annotations
 
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
