@@ -38,6 +38,7 @@ class ModelPatch:
     table_offset: float = 0.0        # m, added to table_height
     size_offset: float = 0.0         # m, added to each box edge's half-width
     restitution: float = 0.0         # Newton restitution of the normal approach speed
+    torsional_friction: float = 0.0  # m, torque about the table normal per unit normal force
     mass_scale: float = 1.0          # scales mass and inertia together
     inertia_scale: float = 1.0       # scales the inertia only
     r_comp: List[float] = dc.field(default_factory=list)  # additive complementarity residual
@@ -89,6 +90,8 @@ def validate_rigid_object(s: RigidObjectScenario) -> None:
          f"patch.size_offset leaves no box, got {p.size_offset}")
     need(finite(p.restitution) and 0 <= p.restitution <= 1,
          f"patch.restitution must be in [0, 1], got {p.restitution}")
+    need(finite(p.torsional_friction) and 0 <= p.torsional_friction < 0.1,
+         f"patch.torsional_friction must be in [0, 0.1) m, got {p.torsional_friction}")
     for key in ("mass_scale", "inertia_scale"):
         v = getattr(p, key)
         need(finite(v) and v > 0, f"patch.{key} must be > 0, got {v}")

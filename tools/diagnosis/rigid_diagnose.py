@@ -67,6 +67,9 @@ EFFECTS = (
                 integer=True),
     RigidEffect("friction", "contact.friction", (0.08, 0.12, 0.18, 0.25, 0.35, 0.5),
                 "1", "the friction coefficient differs from the model's"),
+    RigidEffect("torsional_friction", "patch.torsional_friction", (0.0, 1e-3, 3e-3, 1e-2, 3e-2),
+                "m", "contact patches resist spinning about the table normal (torsional "
+                "friction; the rigid model's point contacts do not)"),
     RigidEffect("compliance", "contact.eps_c", (1e-4, 1e-3, 1e-2, 3e-2, 1e-1),
                 "1/kg", "contact is compliant (the model's contact regulariser is too stiff)"),
     RigidEffect("inertia_scale", "patch.inertia_scale", (0.6, 0.8, 1.0, 1.25, 1.5),
@@ -77,8 +80,8 @@ EFFECTS = (
 NOT_IDENTIFIABLE = {
     "mass_scale": "no input acts on the body: scaling its mass and inertia together leaves "
                   "its motion unchanged (inertia_scale is tried instead)",
-    "torsional_friction": "the rigid model's LCS has no torsional or rolling friction rows "
-                          "yet; not tried",
+    "rolling_friction": "the rigid model has no rolling resistance term yet (a cube "
+                        "tumbles on its edges rather than rolls); not tried",
 }
 
 

@@ -9,6 +9,9 @@ geometry or inertia and shape the plant itself):
 - restitution e: a corner in contact that approaches the table at speed s must leave
   it at >= e s: c_patch -= e max(-J_n v_k, 0) on that corner's rows (Newton's law);
 - r_comp: added to c (one value for every row, or one per row).
+After the step, torsional_friction (m) takes spin about the table normal out with a
+torque impulse of at most that length x the normal impulse (Coulomb; see
+_torsional_friction): the LCS has no torsional rows.
 The LCP (up to 8 corners x n_e edges) is solved on the corners that can touch in this
 step (free-motion gap below zero plus a margin), then checked on all of them.
 """
@@ -17,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 
 from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
-from adaptive_c3.models.rigid_object import (RigidObjectParams, plant_state,
+from adaptive_c3.models.rigid_object import (RigidObjectParams, plant_state, quat_to_matrix,
                                              recording_state, rigid_object_linearizer)
 from adaptive_c3.systems.contact.lcp import solve_lcp
 
@@ -51,6 +54,8 @@ class RigidObjectModel:
             raise RigidModelError(f"patch.r_comp must have 0, 1 or {m} entries, got {r.size}")
         self.r_comp = np.zeros(m) + (r if r.size else 0.0)
         self.restitution = float(scenario.patch.restitution)
+        self.torsional_friction = float(scenario.patch.torsional_friction)
+        self._inertia_body = np.diag(self.params.inertia_diag)
         self._u = np.zeros(0)
         self.lcp_failures = 0
 
@@ -71,8 +76,27 @@ class RigidObjectModel:
             q -= np.repeat(self.restitution * approach, ne)
         lam = self._solve(lcs.F, q, terms.phi, x, terms.J_n)
         x_next = lcs.A @ x + lcs.D @ lam + lcs.d
+        if self.torsional_friction > 0 and np.any(lam > 0):
+            self._torsional_friction(x, x_next, lam.sum())
         x_next[:4] /= np.linalg.norm(x_next[:4])
         return x_next, lam
+
+    def _torsional_friction(self, x, x_next, normal_impulse: float) -> None:
+        """Coulomb torsional friction about the table normal (world z), after the LCS
+        step: a torque impulse of at most torsional_friction (m) x the normal impulse
+        (every edge impulse has a unit normal part) takes spin about z out, never
+        reversing it; the orientation step is redone with the changed spin."""
+        nq = self.linearizer.nq
+        R = quat_to_matrix(x[:4])
+        I_inv = R @ np.linalg.inv(self._inertia_body) @ R.T       # world frame
+        wz = x_next[nq + 2]
+        if wz == 0.0:
+            return
+        tau = min(self.torsional_friction * normal_impulse, abs(wz) / I_inv[2, 2])
+        dw = -np.sign(wz) * tau * I_inv[:, 2]
+        x_next[nq:nq + 3] += dw
+        w, v = x[0], x[1:4]        # q_dot = 0.5 [0, w_world] (x) q, the part from dw
+        x_next[:4] += 0.5 * self.dt * np.r_[-dw @ v, w * dw + np.cross(dw, v)]
 
     def _solve(self, F, q, phi, x, J_n) -> np.ndarray:
         m = q.size
