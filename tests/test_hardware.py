@@ -23,12 +23,21 @@ def scenario():
     return s
 
 
-def test_loopback_rolls_the_ball_through_lcm_alone(tmp_path):
+@pytest.mark.parametrize("low_pass_hz", [
+    100.0,   # libfranka's default torque cutoff
+    pytest.param(30.0, marks=pytest.mark.xfail(strict=True, reason=(
+        "known (issue 17): with drake-franka-driver's default 30 Hz torque low-pass the "
+        "in-process bridge's impedance loop does not reach the ball within 4 s (min "
+        "EE-ball distance 83 mm); the driver-faithful simulated driver shows it"))),
+])
+def test_loopback_rolls_the_ball_through_lcm_alone(tmp_path, low_pass_hz):
     s = scenario()
-    out = run_loopback(s, 4.0, log_path=tmp_path / "run.lcmlog")
+    out = run_loopback(s, 4.0, log_path=tmp_path / "run.lcmlog", low_pass_hz=low_pass_hz)
     drv = out["driver"]
     touch = s.model.ball_radius + s.model.ee_radius    # true radius = model radius here
     assert drv["commands_received"] > 3900             # the driver obeyed LCM commands
+    assert drv["commands_expired"] <= 1                # stamped in its clock (all but the
+                                                       # one sent before any status)
     assert drv["min_ee_ball_distance_m"] < touch + 0.002, drv
     assert drv["ball_displacement_m"] > 0.005, drv     # rolled through LCM alone
     assert out["watchdog"]["counts"]["stale"] == 0 and not out["watchdog"]["latched"]

@@ -158,6 +158,12 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--lcm-url", required=True)
     sd.add_argument("--duration", type=float, default=None, help="seconds (default: the scenario's)")
     sd.add_argument("--status-period", type=float, default=1e-3, help="PANDA_STATUS period, s")
+    sd.add_argument("--expire-sec", type=float, default=0.1,
+                    help="drop a command whose utime is further than this from the driver's clock "
+                    "(the real driver's --expire_sec)")
+    sd.add_argument("--low-pass-hz", type=float, default=30.0,
+                    help="first-order low-pass of the torque command (the real driver's "
+                    "--low_pass_freq; >= 1000: off)")
     sd.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
     sd.set_defaults(func=_delegate("adaptive_c3.tools.hardware.sim_driver", "cmd_sim_driver"))
 

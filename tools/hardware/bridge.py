@@ -10,12 +10,15 @@ process are other processes on the LCM network):
       -> ee.desired_state, ee.feedforward_force -> ImpedanceController
   ImpedanceController.panda.torque_command -> PandaWatchdog (stale status > 50 ms,
       malformed, torque + rate limits, latched stop on non-finite)
-      -> PandaCommandSender (kTorque) -> PANDA_COMMAND (lcmt_panda_command), every 1 ms
+      -> TorqueCommandSender (torque mode, utime = the latest PANDA_STATUS utime: the
+      driver's clock) -> PANDA_COMMAND (lcmt_panda_command), every 1 ms
 
 Channels and types (the vision process must follow the BALL_ESTIMATE layout):
   PANDA_STATUS   drake.lcmt_panda_status   from the Franka driver (7 joints)
   PANDA_COMMAND  drake.lcmt_panda_command  torque mode: joint_torque (7, N m) WITHOUT
-                 gravity (the robot adds its own gravity compensation)
+                 gravity (the robot adds its own gravity compensation); utime = the
+                 latest status's utime (the driver drops commands > --expire_sec off
+                 its clock)
   BALL_ESTIMATE  drake.lcmt_robot_state    num_joints = 6, joint_name = [ball_x, ball_y,
                  ball_z, ball_vx, ball_vy, ball_vz], joint_position = the ball centre (m)
                  and velocity (m/s) in the robot base frame (table top z = 0); utime =
@@ -131,8 +134,7 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
     diagram clock with the wall clock (real-time runs) and zeroes the command while the
     controller lags by more than that."""
     from drake import lcmt_panda_command, lcmt_panda_status, lcmt_robot_state
-    from pydrake.manipulation import (PandaCommandSender, PandaControlMode,
-                                      PandaStatusReceiver)
+    from pydrake.manipulation import PandaStatusReceiver
     from pydrake.systems.lcm import (LcmInterfaceSystem, LcmPublisherSystem,
                                      LcmSubscriberSystem)
     from pydrake.systems.primitives import Multiplexer
@@ -140,6 +142,7 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
     from adaptive_c3.diagrams.ball_rolling import (add_ball_rolling_controller,
                                                    make_impedance_controller)
     from adaptive_c3.systems.franka.panda_watchdog import PandaWatchdog, WatchdogConfig
+    from adaptive_c3.tools.hardware.torque_command_sender import TorqueCommandSender
 
     fast_drake_lcm_copies()
     builder = DiagramBuilder()
@@ -181,10 +184,14 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
     builder.Connect(status_py.get_output_port(), wd.GetInputPort("panda.status"))
     builder.Connect(ctrl.GetOutputPort("panda.torque_command"),
                     wd.GetInputPort("panda.torque_request"))
-    sender = builder.AddSystem(PandaCommandSender(NQ, PandaControlMode.kTorque))
-    builder.Connect(wd.GetOutputPort("panda.torque_command"), sender.GetInputPort("torque"))
+    # torque mode, stamped with the latest status utime (the driver's clock; Drake's
+    # PandaCommandSender stamps the diagram time, which the driver would drop)
+    sender = builder.AddSystem(TorqueCommandSender())
+    builder.Connect(wd.GetOutputPort("panda.torque_command"),
+                    sender.GetInputPort("panda.torque_command"))
+    builder.Connect(status_py.get_output_port(), sender.GetInputPort("lcmt_panda_status"))
     pub = builder.AddSystem(LcmPublisherSystem.Make(
-        COMMAND_CHANNEL, lcmt_panda_command, lcm, command_period, use_cpp_serializer=True))
+        COMMAND_CHANNEL, lcmt_panda_command, lcm, command_period))
     builder.Connect(sender.get_output_port(), pub.get_input_port())
 
     logs = {}
@@ -224,21 +231,24 @@ class LcmRecorder:
 
 def run_loopback(s, duration: float, *, stop_driver_at: float | None = None,
                  log_path=None, step: float = 1e-3, command_period: float = 1e-3,
-                 stale_s: float = 0.05) -> dict:
+                 stale_s: float = 0.05, low_pass_hz: float = 30.0) -> dict:
     """Bridge + simulated driver in one process over memq://, in lock-step.
 
     Every `step` of simulated time: advance the driver (it publishes the status /
     ball estimate), then the bridge (it reads them and publishes its command), so each
     side sees the other's newest message. From `stop_driver_at` on, the driver is no
     longer advanced (as if killed) while the bridge goes on: the result tells when the
-    bridge's command became zero. Returns a summary dict (and the handles under "_")."""
+    bridge's command became zero. The driver keeps the real driver's rules
+    (low_pass_hz: its torque low-pass, 30 Hz as drake-franka-driver's default) on a
+    clock of simulation time from a fixed epoch. Returns a summary dict (and the
+    handles under "_")."""
     from pydrake.lcm import DrakeLcm
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
 
     lcm = DrakeLcm("memq://")
-    drv = build_sim_driver(s, lcm)
+    drv = build_sim_driver(s, lcm, low_pass_hz=low_pass_hz)
     bridge = build_hardware_bridge(s, lcm, command_period=command_period, stale_s=stale_s)
     clock = {"t": 0.0}
     rec = LcmRecorder(lcm, log_path, clock=lambda: clock["t"]) if log_path else None

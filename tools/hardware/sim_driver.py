@@ -6,7 +6,8 @@ TRUE radius (SAP, the scenario's sim_time_step), with the simulated Franka torqu
 robot). It publishes and subscribes only the robot's / vision's LCM messages:
 
   PANDA_STATUS   drake.lcmt_panda_status   every status_period (1 ms): q, v, the torque
-                 commanded/measured; utime = this process's simulation time (us)
+                 commanded/measured, robot_mode = kMove; utime = the driver's clock
+                 (microseconds since the epoch: the wall clock in real time)
   BALL_ESTIMATE  drake.lcmt_robot_state    at camera.rate_hz (80 Hz): the ball estimate
                  as a vision process would send it - true centre + camera.position_noise_m
                  noise, low-pass filtered (`BallPoseSensor`). Layout (see hardware.py):
@@ -14,9 +15,12 @@ robot). It publishes and subscribes only the robot's / vision's LCM messages:
                  ball_z, ball_vx, ball_vy, ball_vz], joint_position = the values (m, m/s,
                  robot base frame W, table top z = 0); utime = time of the estimate (us)
   PANDA_COMMAND  drake.lcmt_panda_command  (subscribed) joint_torque (7, N m, without
-                 gravity). Like the robot's communication reflex, a command older than
-                 command_timeout (100 ms) or malformed counts as zero (the arm then
-                 holds itself against gravity only).
+                 gravity), handled as drake-franka-driver does in torque mode
+                 (systems/franka/franka_driver_rules.py): a command whose utime is more
+                 than --expire-sec (0.1 s) from the driver's clock is dropped and the arm
+                 held by gravity compensation + joint damping; a command in another
+                 control mode or with wrong field counts stops the driver; torques are
+                 low-passed at --low-pass-hz (30 Hz) and rate limited (1000 N m/s).
 
 The simulator runs in real time by default (a robot process); `build_sim_driver` is
 also used in lock-step by tools/hardware/bridge.py's loopback run (one process, memq://).
@@ -37,45 +41,6 @@ from pydrake.systems.primitives import VectorLogSink
 from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, BALL_ESTIMATE_NAMES,
                                                    COMMAND_CHANNEL, NQ, STATUS_CHANNEL,
                                                    fast_drake_lcm_copies, open_lcm)
-
-class CommandDecoder(LeafSystem):
-    """lcmt_panda_command -> joint torques (7), zero if stale / malformed / non-finite.
-
-    input  "lcmt_panda_command" abstract (Python message)
-    output "panda.torque_command" (7) N m, without gravity
-    Staleness is judged by receive time (a change of utime) on this diagram's clock.
-    """
-
-    def __init__(self, period: float, timeout: float = 0.1):
-        super().__init__()
-        from drake import lcmt_panda_command
-        self._timeout = float(timeout)
-        self._in = self.DeclareAbstractInputPort("lcmt_panda_command",
-                                                 AbstractValue.Make(lcmt_panda_command()))
-        # [last utime, receive time, tau (7), count of messages]
-        self._xd = self.DeclareDiscreteState(np.r_[-1.0, -np.inf, np.zeros(NQ), 0.0])
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        self.DeclareVectorOutputPort("panda.torque_command", NQ, self._calc,
-                                     prerequisites_of_calc={self.xd_ticket()})
-
-    def _update(self, context, discrete_state):
-        s = context.get_discrete_state(self._xd).get_value().copy()
-        msg = self._in.Eval(context)
-        if msg.num_joint_torque > 0 and float(msg.utime) != s[0]:
-            tau = np.asarray(msg.joint_torque, float)
-            s[0], s[1], s[-1] = float(msg.utime), context.get_time(), s[-1] + 1
-            ok = tau.shape == (NQ,) and np.all(np.isfinite(tau))
-            s[2:2 + NQ] = tau if ok else 0.0
-        discrete_state.get_mutable_vector(self._xd).set_value(s)
-
-    def _calc(self, context, output):
-        s = context.get_discrete_state(self._xd).get_value()
-        fresh = context.get_time() - s[1] <= self._timeout
-        output.SetFromVector(s[2:2 + NQ] if fresh else np.zeros(NQ))
-
-    def messages(self, context) -> int:
-        return int(context.get_discrete_state(self._xd).get_value()[-1])
-
 
 class BallEstimateEncoder(LeafSystem):
     """ball.position (3), ball.velocity (3) -> lcmt_robot_state (BALL_ESTIMATE layout)."""
@@ -104,27 +69,31 @@ class BallEstimateEncoder(LeafSystem):
 class SimDriver:
     diagram: object
     plant: object
-    command: CommandDecoder
+    command: object         # FrankaTorqueDriver
     logs: dict              # name -> VectorLogSink: ball_true (13), panda_state (14), tau (7)
     true_radius: float
     ball_start: np.ndarray
 
 
-def build_sim_driver(s, lcm, *, status_period: float = 1e-3,
-                     command_timeout: float = 0.1, log_period: float = 0.01) -> SimDriver:
-    """The true plant speaking LCM through `lcm` (a DrakeLcm). See the module doc."""
+def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float = 0.1,
+                     low_pass_hz: float = 30.0, clock=None,
+                     log_period: float = 0.01) -> SimDriver:
+    """The true plant speaking LCM through `lcm` (a DrakeLcm). See the module doc.
+    clock: t -> microseconds since the epoch (tools/hardware/driver_clock.py); default
+    a SimEpochClock (lock-step runs); a real-time driver passes wall_clock_us."""
     from drake import lcmt_panda_command, lcmt_robot_state
-    from pydrake.manipulation import PandaStatusSender
     from pydrake.systems.lcm import (LcmInterfaceSystem, LcmPublisherSystem,
                                      LcmSubscriberSystem)
-    from pydrake.systems.primitives import Demultiplexer
 
     from adaptive_c3.diagrams.ball_rolling import (_set_panda_start, ball_start_xy,
                                                    make_gait, true_radius)
     from adaptive_c3.models.ball_rolling_controller_model import default_state
     from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene
     from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
+    from adaptive_c3.systems.franka.franka_torque_driver import FrankaTorqueDriver
     from adaptive_c3.systems.franka.panda_sim_driver import GravityCompensatedDriver
+    from adaptive_c3.tools.hardware.driver_clock import SimEpochClock
+    from adaptive_c3.tools.hardware.status_sender import StatusSender
 
     if s.robot != "panda":
         raise ValueError("the simulated driver needs robot: panda")
@@ -146,29 +115,25 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3,
 
     builder.AddSystem(LcmInterfaceSystem(lcm))
     sub = builder.AddSystem(LcmSubscriberSystem.Make(COMMAND_CHANNEL, lcmt_panda_command, lcm))
-    cmd = builder.AddSystem(CommandDecoder(s.sim_time_step, command_timeout))
-    builder.Connect(sub.get_output_port(), cmd.get_input_port())
+    clock = clock if clock is not None else SimEpochClock()
+    cmd = builder.AddSystem(FrankaTorqueDriver(clock, expire_sec, low_pass_hz))
+    builder.Connect(sub.get_output_port(), cmd.GetInputPort("lcmt_panda_command"))
     driver = builder.AddSystem(GravityCompensatedDriver())
     state = plant.get_state_output_port(scene.panda)
+    builder.Connect(state, cmd.GetInputPort("panda.state"))
     builder.Connect(cmd.get_output_port(), driver.GetInputPort("panda.torque_command"))
     builder.Connect(state, driver.GetInputPort("panda.state"))
     builder.Connect(driver.GetOutputPort("panda.actuation"),
                     plant.get_actuation_input_port(scene.panda))
 
-    # status: q, v measured; the torque command as commanded and measured
+    # status: q, v measured; the applied torque (without gravity); the driver's clock
     from drake import lcmt_panda_status
-    demux = builder.AddSystem(Demultiplexer([NQ, NQ]))
-    builder.Connect(state, demux.get_input_port())
-    sender = builder.AddSystem(PandaStatusSender(NQ))
-    for name in ("position_commanded", "position_measured"):
-        builder.Connect(demux.get_output_port(0), sender.GetInputPort(name))
-    for name in ("velocity_commanded", "velocity_measured"):
-        builder.Connect(demux.get_output_port(1), sender.GetInputPort(name))
-    for name in ("torque_commanded", "torque_measured"):
-        builder.Connect(cmd.get_output_port(), sender.GetInputPort(name))
+    status = builder.AddSystem(StatusSender(clock))
+    builder.Connect(state, status.GetInputPort("panda.state"))
+    builder.Connect(cmd.get_output_port(), status.GetInputPort("panda.torque_command"))
     pub = builder.AddSystem(LcmPublisherSystem.Make(
-        STATUS_CHANNEL, lcmt_panda_status, lcm, status_period, use_cpp_serializer=True))
-    builder.Connect(sender.get_output_port(), pub.get_input_port())
+        STATUS_CHANNEL, lcmt_panda_status, lcm, status_period))
+    builder.Connect(status.get_output_port(), pub.get_input_port())
 
     cam = s.camera
     sens = builder.AddSystem(BallPoseSensor(
@@ -210,7 +175,7 @@ def driver_summary(drv: SimDriver, context) -> dict:
             "ball_displacement_m": float(np.linalg.norm(b[-1, 4:6] - b[0, 4:6])),
             "ball_final": b[-1, 4:7].tolist(),
             "min_ee_ball_distance_m": float(min(gaps)) if gaps else None,
-            "commands_received": drv.command.messages(dctx)}
+            **drv.command.counts(dctx)}
 
 
 def cmd_sim_driver(args) -> int:
@@ -227,7 +192,15 @@ def cmd_sim_driver(args) -> int:
     if not (math.isfinite(duration) and duration > 0):
         raise UserError(f"--duration must be > 0, got {args.duration}")
     lcm = open_lcm(args.lcm_url)
-    drv = build_sim_driver(s, lcm, status_period=args.status_period)
+    from adaptive_c3.systems.franka.franka_driver_rules import DriverContractError
+    from adaptive_c3.tools.hardware.driver_clock import wall_clock_us
+    if not (math.isfinite(args.expire_sec) and args.expire_sec >= 0):
+        raise UserError(f"--expire-sec must be >= 0, got {args.expire_sec}")
+    if not (math.isfinite(args.low_pass_hz) and args.low_pass_hz > 0):
+        raise UserError(f"--low-pass-hz must be > 0, got {args.low_pass_hz}")
+    drv = build_sim_driver(s, lcm, status_period=args.status_period,
+                           expire_sec=args.expire_sec, low_pass_hz=args.low_pass_hz,
+                           clock=wall_clock_us)
     sim = Simulator(drv.diagram)
     sim.set_target_realtime_rate(1.0)
     sim.Initialize()
@@ -241,11 +214,13 @@ def cmd_sim_driver(args) -> int:
             sim.AdvanceTo(t)
     except KeyboardInterrupt:
         pass
+    except DriverContractError as e:     # the real driver throws and stops here too
+        raise UserError(f"stopped at t = {sim.get_context().get_time():.3f} s: {e}")
     summary = driver_summary(drv, sim.get_context())
     summary["wall_s"] = time.perf_counter() - start
     print(json.dumps(summary), flush=True)
     return 0
 
 
-__all__ = ["build_sim_driver", "cmd_sim_driver", "SimDriver", "CommandDecoder",
+__all__ = ["build_sim_driver", "cmd_sim_driver", "SimDriver",
            "BallEstimateEncoder", "driver_summary"]
