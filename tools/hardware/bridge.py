@@ -50,72 +50,11 @@ import time
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.common.value import AbstractValue
-from pydrake.systems.framework import DiagramBuilder, LeafSystem
+from pydrake.systems.framework import DiagramBuilder
 from pydrake.systems.primitives import VectorLogSink
 
-from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, COMMAND_CHANNEL, NQ,
-                                                   STATUS_CHANNEL, decode_ball_estimate,
-                                                   fast_drake_lcm_copies, open_lcm)
-
-
-class BallEstimateDecoder(LeafSystem):
-    """lcmt_robot_state (BALL_ESTIMATE layout) -> ball.position (3), ball.velocity (3).
-
-    Every `period` s it takes the subscriber's newest message if it fits the layout
-    (finite, 6 named values) and holds it; before the first valid message it outputs
-    `prior` (the scenario's start position, at rest). Messages of another layout are
-    counted and ignored. (The controller's LCS refuses non-finite states, so the
-    decoder never outputs NaN.)"""
-
-    def __init__(self, prior, period: float = 1e-3):
-        super().__init__()
-        from drake import lcmt_robot_state
-        self._in = self.DeclareAbstractInputPort("lcmt_robot_state",
-                                                 AbstractValue.Make(lcmt_robot_state()))
-        # [p (3), v (3), valid messages, ignored messages, last utime]
-        self._xd = self.DeclareDiscreteState(np.r_[np.asarray(prior, float), np.zeros(3),
-                                                   0.0, 0.0, -1.0])
-        self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
-        ticket = {self.xd_ticket()}
-        self.DeclareVectorOutputPort("ball.position", 3, lambda c, o: o.SetFromVector(self._s(c)[:3]),
-                                     prerequisites_of_calc=ticket)
-        self.DeclareVectorOutputPort("ball.velocity", 3, lambda c, o: o.SetFromVector(self._s(c)[3:6]),
-                                     prerequisites_of_calc=ticket)
-
-    def _s(self, context):
-        return context.get_discrete_state(self._xd).get_value()
-
-    def _update(self, context, discrete_state):
-        s = self._s(context).copy()
-        msg = self._in.Eval(context)
-        if msg.num_joints > 0 and float(msg.utime) != s[8]:
-            s[8] = float(msg.utime)
-            v = decode_ball_estimate(msg)
-            if np.all(np.isfinite(v)):
-                s[:6], s[6] = v, s[6] + 1
-            else:
-                s[7] += 1
-        discrete_state.get_mutable_vector(self._xd).set_value(s)
-
-    def counts(self, context) -> dict:
-        s = self._s(context)
-        return {"ball_messages": int(s[6]), "ball_messages_ignored": int(s[7])}
-
-
-class FiniteOr(LeafSystem):
-    """Passes a vector through, or `fallback` if it has a non-finite entry (stateless):
-    keeps the controller's pipeline finite; the watchdog latches the stop itself."""
-
-    def __init__(self, fallback):
-        super().__init__()
-        self._fb = np.asarray(fallback, float)
-        self._in = self.DeclareVectorInputPort("u", self._fb.size)
-        self.DeclareVectorOutputPort("y", self._fb.size, self._calc)
-
-    def _calc(self, context, output):
-        x = self._in.Eval(context)
-        output.SetFromVector(x if np.all(np.isfinite(x)) else self._fb)
+from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, COMMAND_CHANNEL,
+                                                     STATUS_CHANNEL, open_lcm)
 
 
 @dataclass
@@ -133,66 +72,26 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
     """The bridge diagram (module doc). max_lag_s < inf: the watchdog also compares the
     diagram clock with the wall clock (real-time runs) and zeroes the command while the
     controller lags by more than that."""
-    from drake import lcmt_panda_command, lcmt_panda_status, lcmt_robot_state
-    from pydrake.manipulation import PandaStatusReceiver
-    from pydrake.systems.lcm import (LcmInterfaceSystem, LcmPublisherSystem,
-                                     LcmSubscriberSystem)
-    from pydrake.systems.primitives import Multiplexer
-
     from adaptive_c3.diagrams.ball_rolling import (add_ball_rolling_controller,
                                                    make_impedance_controller)
-    from adaptive_c3.systems.franka.panda_watchdog import PandaWatchdog, WatchdogConfig
-    from adaptive_c3.tools.hardware.torque_command_sender import TorqueCommandSender
-
-    fast_drake_lcm_copies()
+    from adaptive_c3.tools.hardware.controller_pieces import (add_ball_input,
+                                                              add_command_output, add_lcm,
+                                                              add_status_input)
     builder = DiagramBuilder()
-    builder.AddSystem(LcmInterfaceSystem(lcm))
-    # the status twice: C++-decoded for Drake's receiver, Python-decoded for the watchdog
-    status_cpp = builder.AddSystem(LcmSubscriberSystem.Make(
-        STATUS_CHANNEL, lcmt_panda_status, lcm, use_cpp_serializer=True))
-    status_py = builder.AddSystem(LcmSubscriberSystem.Make(
-        STATUS_CHANNEL, lcmt_panda_status, lcm))
-    status_py.set_name(f"LcmSubscriberSystem({STATUS_CHANNEL}, python)")
-    receiver = builder.AddSystem(PandaStatusReceiver(NQ))
-    builder.Connect(status_cpp.get_output_port(), receiver.get_input_port())
-    mux = builder.AddSystem(Multiplexer([NQ, NQ]))
-    builder.Connect(receiver.GetOutputPort("position_measured"), mux.get_input_port(0))
-    builder.Connect(receiver.GetOutputPort("velocity_measured"), mux.get_input_port(1))
-
-    imp = s.impedance
+    add_lcm(builder, lcm)
+    status = add_status_input(builder, lcm, s)
     ctrl = builder.AddSystem(make_impedance_controller(s))
-    finite = builder.AddSystem(FiniteOr(np.r_[np.asarray(imp.q_null, float), np.zeros(NQ)]))
-    builder.Connect(mux.get_output_port(), finite.get_input_port())
-    builder.Connect(finite.get_output_port(), ctrl.GetInputPort("panda.state"))
-
-    ball_sub = builder.AddSystem(LcmSubscriberSystem.Make(BALL_CHANNEL, lcmt_robot_state, lcm))
-    from adaptive_c3.diagrams.ball_rolling import ball_start_xy
-    ball = builder.AddSystem(BallEstimateDecoder(np.r_[ball_start_xy(s), s.model.ball_radius],
-                                                 period=max(command_period, 2e-3)))
-    builder.Connect(ball_sub.get_output_port(), ball.get_input_port())
-
+    builder.Connect(status.arm_state, ctrl.GetInputPort("panda.state"))
+    ball = add_ball_input(builder, lcm, s, period=max(command_period, 2e-3))
     c = add_ball_rolling_controller(builder, s, ctrl.GetOutputPort("ee.state"),
                                     ctrl.GetOutputPort("ee.commanded_force"),
                                     ball.GetOutputPort("ball.position"),
                                     ball.GetOutputPort("ball.velocity"))
     builder.Connect(c.ee_desired_state, ctrl.GetInputPort("ee.desired_state"))
     builder.Connect(c.ee_feedforward_force, ctrl.GetInputPort("ee.feedforward_force"))
-
-    wd = builder.AddSystem(PandaWatchdog(
-        WatchdogConfig(stale_s=stale_s, rate_limit=rate_limit, max_lag_s=max_lag_s),
-        period=command_period, wall_clock=math.isfinite(max_lag_s)))
-    builder.Connect(status_py.get_output_port(), wd.GetInputPort("panda.status"))
-    builder.Connect(ctrl.GetOutputPort("panda.torque_command"),
-                    wd.GetInputPort("panda.torque_request"))
-    # torque mode, stamped with the latest status utime (the driver's clock; Drake's
-    # PandaCommandSender stamps the diagram time, which the driver would drop)
-    sender = builder.AddSystem(TorqueCommandSender())
-    builder.Connect(wd.GetOutputPort("panda.torque_command"),
-                    sender.GetInputPort("panda.torque_command"))
-    builder.Connect(status_py.get_output_port(), sender.GetInputPort("lcmt_panda_status"))
-    pub = builder.AddSystem(LcmPublisherSystem.Make(
-        COMMAND_CHANNEL, lcmt_panda_command, lcm, command_period))
-    builder.Connect(sender.get_output_port(), pub.get_input_port())
+    wd = add_command_output(builder, lcm, status.status, ctrl.GetOutputPort("panda.torque_command"),
+                            command_period=command_period, stale_s=stale_s,
+                            rate_limit=rate_limit, max_lag_s=max_lag_s)
 
     logs = {}
     for name, port in (("lcs_state", c.lcs_state), ("ee_force", ctrl.GetOutputPort("ee.commanded_force")),
@@ -357,4 +256,4 @@ def cmd_hardware(args) -> int:
 
 
 __all__ = ["build_hardware_bridge", "cmd_hardware", "run_loopback", "HardwareBridge",
-           "BallEstimateDecoder", "LcmRecorder"]
+           "LcmRecorder"]

@@ -96,3 +96,36 @@ def open_lcm(url: str):
     if not got:
         raise UserError(f"cannot send/receive on LCM at '{url}'")
     return lcm
+
+
+# ---------------------------------------------------------------- the planner's EE plan
+PLAN_CHANNEL = "EE_PLAN"
+# drake.lcmt_robot_state in this layout: the impedance target from the planner process,
+# robot base frame; utime = the PANDA_STATUS utime the plan was computed from (the
+# driver's clock), so the impedance process can judge the plan's age in that clock
+PLAN_NAMES = ("ee_x", "ee_y", "ee_z",          # desired EE tip position, m
+              "ee_vx", "ee_vy", "ee_vz",       # desired EE tip velocity, m/s
+              "ee_fx", "ee_fy", "ee_fz")       # feed-forward force at the tip, N
+
+
+def encode_plan(utime: int, desired_state, feedforward):
+    """An lcmt_robot_state in the EE_PLAN layout."""
+    from drake import lcmt_robot_state
+    msg = lcmt_robot_state()
+    msg.utime = int(utime)
+    msg.num_joints = len(PLAN_NAMES)
+    msg.joint_name = list(PLAN_NAMES)
+    msg.joint_position = [float(v) for v in np.r_[desired_state, feedforward]]
+    return msg
+
+
+def decode_plan(msg) -> np.ndarray | None:
+    """(9) [p, v, f] from an EE_PLAN message, None if it does not fit the layout."""
+    try:
+        if msg.num_joints == len(PLAN_NAMES) and tuple(msg.joint_name) == PLAN_NAMES:
+            v = np.asarray(msg.joint_position, float)
+            if v.shape == (len(PLAN_NAMES),) and np.all(np.isfinite(v)):
+                return v
+    except (TypeError, ValueError):
+        pass
+    return None

@@ -1,0 +1,89 @@
+"""The pieces the LCM controllers are built from, each added to a DiagramBuilder:
+
+  add_status_input    PANDA_STATUS -> the arm state (14, finite) and the Python message
+  add_ball_input      BALL_ESTIMATE -> ball.position, ball.velocity
+  add_command_output  a torque request -> PandaWatchdog -> TorqueCommandSender -> PANDA_COMMAND
+The single-process bridge (bridge.py) and the two processes (impedance_process.py,
+planner_process.py) are recipes of these and the controller systems.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, COMMAND_CHANNEL, NQ,
+                                                     STATUS_CHANNEL, fast_drake_lcm_copies)
+
+
+@dataclass
+class StatusInput:
+    status: object          # output port: the newest lcmt_panda_status (Python message)
+    arm_state: object       # output port: (14) q, v, with q_null / 0 for non-finite values
+
+
+def add_lcm(builder, lcm):
+    from pydrake.systems.lcm import LcmInterfaceSystem
+    fast_drake_lcm_copies()
+    builder.AddSystem(LcmInterfaceSystem(lcm))
+
+
+def add_status_input(builder, lcm, s) -> StatusInput:
+    """The status twice: C++-decoded for Drake's receiver, Python-decoded for the rest."""
+    from drake import lcmt_panda_status
+    from pydrake.manipulation import PandaStatusReceiver
+    from pydrake.systems.lcm import LcmSubscriberSystem
+    from pydrake.systems.primitives import Multiplexer
+
+    from adaptive_c3.tools.hardware.finite_or import FiniteOr
+    status_cpp = builder.AddSystem(LcmSubscriberSystem.Make(
+        STATUS_CHANNEL, lcmt_panda_status, lcm, use_cpp_serializer=True))
+    status_py = builder.AddSystem(LcmSubscriberSystem.Make(STATUS_CHANNEL, lcmt_panda_status, lcm))
+    status_py.set_name(f"LcmSubscriberSystem({STATUS_CHANNEL}, python)")
+    receiver = builder.AddSystem(PandaStatusReceiver(NQ))
+    builder.Connect(status_cpp.get_output_port(), receiver.get_input_port())
+    mux = builder.AddSystem(Multiplexer([NQ, NQ]))
+    builder.Connect(receiver.GetOutputPort("position_measured"), mux.get_input_port(0))
+    builder.Connect(receiver.GetOutputPort("velocity_measured"), mux.get_input_port(1))
+    finite = builder.AddSystem(FiniteOr(np.r_[np.asarray(s.impedance.q_null, float), np.zeros(NQ)]))
+    builder.Connect(mux.get_output_port(), finite.get_input_port())
+    return StatusInput(status_py.get_output_port(), finite.get_output_port())
+
+
+def add_ball_input(builder, lcm, s, period: float):
+    from drake import lcmt_robot_state
+    from pydrake.systems.lcm import LcmSubscriberSystem
+
+    from adaptive_c3.diagrams.ball_rolling import ball_start_xy
+    from adaptive_c3.tools.hardware.ball_estimate_decoder import BallEstimateDecoder
+    sub = builder.AddSystem(LcmSubscriberSystem.Make(BALL_CHANNEL, lcmt_robot_state, lcm))
+    ball = builder.AddSystem(BallEstimateDecoder(np.r_[ball_start_xy(s), s.model.ball_radius],
+                                                 period=period))
+    builder.Connect(sub.get_output_port(), ball.get_input_port())
+    return ball
+
+
+def add_command_output(builder, lcm, status_port, torque_port, *, command_period: float,
+                       stale_s: float, rate_limit: float, max_lag_s: float = math.inf):
+    """Watchdog, then the torque-mode command stamped with the latest status utime (the
+    driver's clock; Drake's PandaCommandSender stamps the diagram time, which the driver
+    would drop). Returns the watchdog."""
+    from drake import lcmt_panda_command
+    from pydrake.systems.lcm import LcmPublisherSystem
+
+    from adaptive_c3.systems.franka.panda_watchdog import PandaWatchdog, WatchdogConfig
+    from adaptive_c3.tools.hardware.torque_command_sender import TorqueCommandSender
+    wd = builder.AddSystem(PandaWatchdog(
+        WatchdogConfig(stale_s=stale_s, rate_limit=rate_limit, max_lag_s=max_lag_s),
+        period=command_period, wall_clock=math.isfinite(max_lag_s)))
+    builder.Connect(status_port, wd.GetInputPort("panda.status"))
+    builder.Connect(torque_port, wd.GetInputPort("panda.torque_request"))
+    sender = builder.AddSystem(TorqueCommandSender())
+    builder.Connect(wd.GetOutputPort("panda.torque_command"),
+                    sender.GetInputPort("panda.torque_command"))
+    builder.Connect(status_port, sender.GetInputPort("lcmt_panda_status"))
+    pub = builder.AddSystem(LcmPublisherSystem.Make(
+        COMMAND_CHANNEL, lcmt_panda_command, lcm, command_period))
+    builder.Connect(sender.get_output_port(), pub.get_input_port())
+    return wd
