@@ -149,7 +149,29 @@ def build_parser() -> argparse.ArgumentParser:
     hw.add_argument("--loopback", action="store_true",
                     help="run the bridge and the simulated driver in one process over memq://, "
                     "in lock-step (a self-test; --duration defaults to the scenario's)")
+    hw.add_argument("--split", action="store_true",
+                    help="run the 1 kHz impedance loop and the planner as two processes "
+                    "(`impedance` + `planner`); with --loopback: the three parts in lock-step")
     hw.set_defaults(func=_delegate("adaptive_c3.tools.hardware.bridge", "cmd_hardware"))
+
+    def controller_process(name, help_text, func):
+        cp = sub.add_parser(name, help=help_text, description=help_text)
+        cp.add_argument("scenario", help="ball_rolling scenario YAML (a path or a shipped name)")
+        cp.add_argument("--lcm-url", required=True, help="LCM URL, e.g. udpm://239.255.76.67:7667?ttl=0")
+        cp.add_argument("--duration", type=float, default=None, help="stop after S seconds")
+        cp.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
+        cp.set_defaults(func=_delegate("adaptive_c3.tools.hardware.process_commands", func))
+        return cp
+    imp = controller_process(
+        "impedance", "the 1 kHz loop alone: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND (torque mode, "
+        "stamped with the status utime), watchdog, plan hold/timeout, robot_mode gate", "cmd_impedance")
+    imp.add_argument("--stale-ms", type=float, default=50.0, help="status older than this -> zero torque")
+    imp.add_argument("--max-lag-ms", type=float, default=100.0,
+                     help="zero torque while the loop runs more than this behind real time")
+    imp.add_argument("--period", type=float, default=1e-3, help="command period, s")
+    controller_process("planner", "estimator, Anitescu LCS, residual learner and C3: PANDA_STATUS + "
+                       "BALL_ESTIMATE -> EE_PLAN (drake.lcmt_robot_state: EE target, velocity, "
+                       "feed-forward force)", "cmd_planner")
 
     sd = sub.add_parser("sim-driver", help="the simulated robot + ball speaking only LCM (for `hardware`)",
                         description="Runs the true plant (Panda, table, ball; SAP) in real time and "

@@ -72,23 +72,17 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
     """The bridge diagram (module doc). max_lag_s < inf: the watchdog also compares the
     diagram clock with the wall clock (real-time runs) and zeroes the command while the
     controller lags by more than that."""
-    from adaptive_c3.diagrams.ball_rolling import (add_ball_rolling_controller,
-                                                   make_impedance_controller)
+    from adaptive_c3.diagrams.ball_rolling import make_impedance_controller
     from adaptive_c3.tools.hardware.controller_pieces import (add_ball_input,
                                                               add_command_output, add_lcm,
-                                                              add_status_input)
+                                                              add_planner, add_status_input)
     builder = DiagramBuilder()
     add_lcm(builder, lcm)
     status = add_status_input(builder, lcm, s)
     ctrl = builder.AddSystem(make_impedance_controller(s))
     builder.Connect(status.arm_state, ctrl.GetInputPort("panda.state"))
     ball = add_ball_input(builder, lcm, s, period=max(command_period, 2e-3))
-    c = add_ball_rolling_controller(builder, s, ctrl.GetOutputPort("ee.state"),
-                                    ctrl.GetOutputPort("ee.commanded_force"),
-                                    ball.GetOutputPort("ball.position"),
-                                    ball.GetOutputPort("ball.velocity"))
-    builder.Connect(c.ee_desired_state, ctrl.GetInputPort("ee.desired_state"))
-    builder.Connect(c.ee_feedforward_force, ctrl.GetInputPort("ee.feedforward_force"))
+    c = add_planner(builder, s, ctrl, ball)
     wd = add_command_output(builder, lcm, status.status, ctrl.GetOutputPort("panda.torque_command"),
                             command_period=command_period, stale_s=stale_s,
                             rate_limit=rate_limit, max_lag_s=max_lag_s)
@@ -194,62 +188,36 @@ def run_loopback(s, duration: float, *, stop_driver_at: float | None = None,
     return out
 
 
-def _load(args):
-    from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
-    from adaptive_c3.tools.user_input import UserError, resolve_scenario_path
-    s, text = load_scenario(resolve_scenario_path(args.scenario), list(getattr(args, "set", None) or []))
-    if s.task != "ball_rolling":
-        raise ScenarioError(f"hardware needs a ball_rolling scenario, got task '{s.task}'")
-    if s.robot != "panda":
-        raise ScenarioError("hardware needs robot: panda (the bridge speaks lcmt_panda_*)")
-    duration = args.duration if args.duration is not None else None
-    if duration is not None and not (math.isfinite(duration) and duration > 0):
-        raise UserError(f"--duration must be > 0, got {duration}")
-    if not (math.isfinite(args.stale_ms) and args.stale_ms > 0):
-        raise UserError(f"--stale-ms must be > 0, got {args.stale_ms}")
-    if not (args.max_lag_ms > 0):
-        raise UserError(f"--max-lag-ms must be > 0, got {args.max_lag_ms}")
-    if not (math.isfinite(args.period) and 1e-4 <= args.period <= 0.01):
-        raise UserError(f"--period must be in [0.0001, 0.01] s, got {args.period}")
-    return s, text, duration
-
-
 def cmd_hardware(args) -> int:
-    from pydrake.systems.analysis import Simulator
-    s, _, duration = _load(args)
+    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_realtime
+    s, _, duration = load_hardware_scenario(args)
     stale_s = args.stale_ms * 1e-3
     if args.loopback:
-        out = run_loopback(s, duration or s.sim_duration_s, log_path=args.log, stale_s=stale_s)
+        if args.split:
+            from adaptive_c3.tools.hardware.split_loopback import run_split_loopback
+            out = run_split_loopback(s, duration or s.sim_duration_s, stale_s=stale_s)
+        else:
+            out = run_loopback(s, duration or s.sim_duration_s, log_path=args.log, stale_s=stale_s)
         out.pop("_")
         print(json.dumps(out, default=float), flush=True)
         return 0
     if not args.lcm_url:
         from adaptive_c3.tools.user_input import UserError
         raise UserError("--lcm-url is required (or --loopback)")
+    if args.split:
+        from adaptive_c3.tools.hardware.process_commands import run_split
+        open_lcm(args.lcm_url)           # a bad URL: one line here, not two tracebacks
+        return run_split(args)
     lcm = open_lcm(args.lcm_url)
     bridge = build_hardware_bridge(s, lcm, stale_s=stale_s, command_period=args.period,
                                    max_lag_s=args.max_lag_ms * 1e-3)
     rec = LcmRecorder(lcm, args.log) if args.log else None
-    sim = Simulator(bridge.diagram)
-    sim.set_target_realtime_rate(1.0)
-    sim.Initialize()
-    print(f"hardware: bridge on {args.lcm_url}: {STATUS_CHANNEL} + {BALL_CHANNEL} -> "
-          f"{COMMAND_CHANNEL}; watchdog {args.stale_ms:g} ms"
-          + (f"; for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
-    ctx = sim.get_context()
+    ctx, wall = run_realtime(
+        bridge.diagram, duration,
+        f"hardware: bridge on {args.lcm_url}: {STATUS_CHANNEL} + {BALL_CHANNEL} -> "
+        f"{COMMAND_CHANNEL}; watchdog {args.stale_ms:g} ms", on_stop=rec.close if rec else None)
     wd_ctx = bridge.watchdog.GetMyContextFromRoot(ctx)
-    start = time.perf_counter()
-    t = 0.0
-    try:
-        while duration is None or t < duration - 1e-12:
-            t = t + 0.1 if duration is None else min(t + 0.1, duration)
-            sim.AdvanceTo(t)
-    except KeyboardInterrupt:
-        pass
-    finally:
-        if rec:
-            rec.close()
-    out = {"sim_time_s": float(ctx.get_time()), "wall_s": time.perf_counter() - start,
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
            "watchdog": bridge.watchdog.report(wd_ctx)}
     print(json.dumps(out, default=float), flush=True)
     return 0

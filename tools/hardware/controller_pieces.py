@@ -2,6 +2,7 @@
 
   add_status_input    PANDA_STATUS -> the arm state (14, finite) and the Python message
   add_ball_input      BALL_ESTIMATE -> ball.position, ball.velocity
+  add_planner         the ball-rolling controller on the EE state and the ball
   add_command_output  a torque request -> PandaWatchdog -> TorqueCommandSender -> PANDA_COMMAND
 The single-process bridge (bridge.py) and the two processes (impedance_process.py,
 planner_process.py) are recipes of these and the controller systems.
@@ -62,6 +63,20 @@ def add_ball_input(builder, lcm, s, period: float):
                                                  period=period))
     builder.Connect(sub.get_output_port(), ball.get_input_port())
     return ball
+
+
+def add_planner(builder, s, ctrl, ball):
+    """The ball-rolling controller (estimator, Anitescu LCS, learner, C3) on the impedance
+    controller's EE state and the decoded ball, its EE target fed back to `ctrl` (whose
+    commanded force is then the learner's applied-force input). Returns the controller."""
+    from adaptive_c3.diagrams.ball_rolling import add_ball_rolling_controller
+    c = add_ball_rolling_controller(builder, s, ctrl.GetOutputPort("ee.state"),
+                                    ctrl.GetOutputPort("ee.commanded_force"),
+                                    ball.GetOutputPort("ball.position"),
+                                    ball.GetOutputPort("ball.velocity"))
+    builder.Connect(c.ee_desired_state, ctrl.GetInputPort("ee.desired_state"))
+    builder.Connect(c.ee_feedforward_force, ctrl.GetInputPort("ee.feedforward_force"))
+    return c
 
 
 def add_command_output(builder, lcm, status_port, torque_port, *, command_period: float,

@@ -1,0 +1,83 @@
+"""The hardware run split as the reference system has it (issue 17, item 1): the 1 kHz
+impedance process and the planner process, here in lock-step with the simulated driver
+over memq://, and their guards on their own."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from pydrake.common.value import AbstractValue
+
+from adaptive_c3.scenarios.schema import load_scenario
+from adaptive_c3.tools import cli
+from adaptive_c3.tools.hardware.lcm_channels import decode_plan, encode_plan
+from adaptive_c3.tools.hardware.plan_decoder import PlanDecoder
+from adaptive_c3.tools.hardware.split_loopback import run_split_loopback
+from adaptive_c3.tools.hardware.torque_gate import TorqueGate
+
+FAST = ["camera.enabled=false", "model.radius_error=0"]
+NOW = 1_764_000_000_000_000
+
+
+@pytest.mark.parametrize("low_pass_hz, extra", [
+    (100.0, []),                                   # libfranka's default cutoff
+    (30.0, ["impedance.rotational_stiffness=200",  # the driver's 30 Hz with softer wrist
+            "impedance.rotational_damping=5"]),    # gains (900/20 does not reach the ball)
+])
+def test_three_parts_over_lcm_roll_the_ball(low_pass_hz, extra):
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST + extra)
+    out = run_split_loopback(s, 4.0, low_pass_hz=low_pass_hz)
+    drv = out["driver"]
+    assert drv["commands_expired"] == 0 and drv["commands_received"] > 3900
+    assert drv["min_ee_ball_distance_m"] < s.model.ball_radius + s.model.ee_radius + 0.002
+    assert drv["ball_displacement_m"] > 0.02, drv
+    assert out["plans_used"] > 700 and out["plans_ignored"] == 0
+    assert out["watchdog"]["counts"]["stale"] == 0 and not out["watchdog"]["latched"]
+
+
+def test_plan_layout_round_trips_and_refuses_others():
+    msg = encode_plan(NOW, np.arange(6.0), [7.0, 8.0, 9.0])
+    assert np.allclose(decode_plan(msg), [0, 1, 2, 3, 4, 5, 7, 8, 9])
+    msg = type(msg).decode(msg.encode())                  # through the wire (float32)
+    assert np.allclose(decode_plan(msg), [0, 1, 2, 3, 4, 5, 7, 8, 9])
+    msg.joint_name = list(msg.joint_name[:-1]) + ["other"]
+    assert decode_plan(msg) is None
+
+
+def _status(utime, mode=None):
+    from drake import lcmt_panda_status
+    m = lcmt_panda_status()
+    m.utime = int(utime)
+    m.robot_mode = lcmt_panda_status.kMove if mode is None else mode
+    return m
+
+
+def test_plan_decoder_holds_then_gives_up():
+    dec = PlanDecoder(period=1e-3, hold_s=0.1, timeout_s=0.5)
+    ctx = dec.CreateDefaultContext()
+    plan_port, status_port = dec.GetInputPort("lcmt_robot_state"), dec.GetInputPort("lcmt_panda_status")
+    plan_port.FixValue(ctx, AbstractValue.Make(encode_plan(NOW, [0.5, 0, 0.1, 0.2, 0, 0], [0, 0, 3])))
+    status_port.FixValue(ctx, AbstractValue.Make(_status(NOW)))
+    assert dec.GetOutputPort("plan.ok").Eval(ctx)[0] == 0.0          # nothing taken yet
+    state = dec.EvalUniquePeriodicDiscreteUpdate(ctx)
+    ctx.SetDiscreteState(state)
+    for age_ms, ok, vx, fz in ((10, 1.0, 0.2, 3.0), (150, 1.0, 0.0, 0.0), (600, 0.0, 0.0, 0.0)):
+        status_port.FixValue(ctx, AbstractValue.Make(_status(NOW + 1000 * age_ms)))
+        assert dec.GetOutputPort("plan.ok").Eval(ctx)[0] == ok
+        desired = dec.GetOutputPort("ee.desired_state").Eval(ctx)
+        # (lcmt_robot_state carries float32: compare to its precision)
+        assert desired[0] == pytest.approx(0.5) and desired[3] == pytest.approx(vx)  # held
+        assert dec.GetOutputPort("ee.feedforward_force").Eval(ctx)[2] == pytest.approx(fz)
+
+
+def test_torque_gate_zeroes_unless_plan_and_robot_mode_allow():
+    from drake import lcmt_panda_status
+    gate = TorqueGate()
+    ctx = gate.CreateDefaultContext()
+    gate.GetInputPort("panda.torque_request").FixValue(ctx, np.ones(7))
+    for ok, mode, expect in ((1.0, lcmt_panda_status.kMove, 1.0), (1.0, lcmt_panda_status.kIdle, 1.0),
+                             (0.0, lcmt_panda_status.kMove, 0.0),
+                             (1.0, lcmt_panda_status.kReflex, 0.0),
+                             (1.0, lcmt_panda_status.kGuiding, 0.0)):
+        gate.GetInputPort("plan.ok").FixValue(ctx, [ok])
+        gate.GetInputPort("lcmt_panda_status").FixValue(ctx, AbstractValue.Make(_status(NOW, mode)))
+        assert np.all(gate.get_output_port().Eval(ctx) == expect)

@@ -1,0 +1,52 @@
+"""`adaptive-c3 planner SCENARIO --lcm-url URL`: estimator, Anitescu LCS, residual learner
+and C3, apart from the 1 kHz loop.
+
+  PANDA_STATUS -> arm state -> EE state (the impedance controller's kinematics; its
+  commanded force, computed from the plan as the impedance process does, is the
+  learner's applied-force input when the scenario asks for it)
+  BALL_ESTIMATE -> ball position, velocity
+  -> add_ball_rolling_controller (as in simulation) -> PlanEncoder -> EE_PLAN every
+  plan_period (the EE target, its velocity and the feed-forward force, stamped with the
+  status utime it was planned from).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from pydrake.systems.framework import DiagramBuilder
+
+
+@dataclass
+class PlannerProcess:
+    diagram: object
+    controller: object       # BallRollingController
+    ball: object             # BallEstimateDecoder
+
+
+def build_planner_process(s, lcm, *, plan_period: float = 0.005,
+                          ball_period: float = 2e-3) -> PlannerProcess:
+    from drake import lcmt_robot_state
+    from pydrake.systems.lcm import LcmPublisherSystem
+
+    from adaptive_c3.diagrams.ball_rolling import make_impedance_controller
+    from adaptive_c3.tools.hardware.controller_pieces import (add_ball_input, add_lcm,
+                                                              add_planner, add_status_input)
+    from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL
+    from adaptive_c3.tools.hardware.plan_encoder import PlanEncoder
+    builder = DiagramBuilder()
+    add_lcm(builder, lcm)
+    status = add_status_input(builder, lcm, s)
+    kin = builder.AddSystem(make_impedance_controller(s))     # for ee.state / commanded force
+    builder.Connect(status.arm_state, kin.GetInputPort("panda.state"))
+    ball = add_ball_input(builder, lcm, s, period=ball_period)
+    c = add_planner(builder, s, kin, ball)
+    enc = builder.AddSystem(PlanEncoder())
+    builder.Connect(c.ee_desired_state, enc.GetInputPort("ee.desired_state"))
+    builder.Connect(c.ee_feedforward_force, enc.GetInputPort("ee.feedforward_force"))
+    builder.Connect(status.status, enc.GetInputPort("lcmt_panda_status"))
+    pub = builder.AddSystem(LcmPublisherSystem.Make(PLAN_CHANNEL, lcmt_robot_state, lcm,
+                                                    plan_period))
+    builder.Connect(enc.get_output_port(), pub.get_input_port())
+    diagram = builder.Build()
+    diagram.set_name(f"planner[{s.name}]")
+    return PlannerProcess(diagram, c, ball)

@@ -1,0 +1,66 @@
+"""`adaptive-c3 impedance` and `adaptive-c3 planner`: the two controller processes of a
+hardware run (impedance_process.py, planner_process.py), each a Drake Simulator held to
+real time, and `hardware --split`, which starts both."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import time
+
+
+def cmd_impedance(args) -> int:
+    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_realtime
+    from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
+    from adaptive_c3.tools.hardware.lcm_channels import open_lcm
+    s, _, duration = load_hardware_scenario(args)
+    proc = build_impedance_process(s, open_lcm(args.lcm_url), command_period=args.period,
+                                   stale_s=args.stale_ms * 1e-3,
+                                   max_lag_s=args.max_lag_ms * 1e-3)
+    ctx, wall = run_realtime(proc.diagram, duration,
+                              f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}")
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
+           "watchdog": proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx)),
+           **proc.plan.counts(proc.plan.GetMyContextFromRoot(ctx))}
+    print(json.dumps(out, default=float), flush=True)
+    return 0
+
+
+def cmd_planner(args) -> int:
+    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_realtime
+    from adaptive_c3.tools.hardware.lcm_channels import open_lcm
+    from adaptive_c3.tools.hardware.planner_process import build_planner_process
+    s, _, duration = load_hardware_scenario(args)
+    proc = build_planner_process(s, open_lcm(args.lcm_url))
+    ctx, wall = run_realtime(proc.diagram, duration,
+                              f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}")
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
+           **proc.ball.counts(proc.ball.GetMyContextFromRoot(ctx))}
+    print(json.dumps(out, default=float), flush=True)
+    return 0
+
+
+def run_split(args) -> int:
+    """`hardware --split`: the impedance and planner processes side by side; stops both
+    when either ends."""
+    common = [args.scenario, "--lcm-url", args.lcm_url]
+    for kv in args.set or []:
+        common += ["--set", kv]
+    if args.duration is not None:
+        common += ["--duration", str(args.duration)]
+    exe = [sys.executable, "-m", "adaptive_c3.tools.cli"]
+    procs = [subprocess.Popen(exe + ["impedance", *common, "--stale-ms", str(args.stale_ms),
+                                     "--max-lag-ms", str(args.max_lag_ms),
+                                     "--period", str(args.period)]),
+             subprocess.Popen(exe + ["planner", *common])]
+    try:
+        while all(p.poll() is None for p in procs):
+            time.sleep(0.1)
+    except KeyboardInterrupt:
+        pass
+    finally:
+        for p in procs:
+            if p.poll() is None:
+                p.terminate()
+        codes = [p.wait() for p in procs]
+    return max(codes) if any(codes) else 0
