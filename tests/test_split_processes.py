@@ -3,6 +3,8 @@ impedance process and the planner process, here in lock-step with the simulated 
 over memq://, and their guards on their own."""
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from pydrake.common.value import AbstractValue
@@ -81,3 +83,19 @@ def test_torque_gate_zeroes_unless_plan_and_robot_mode_allow():
         gate.GetInputPort("plan.ok").FixValue(ctx, [ok])
         gate.GetInputPort("lcmt_panda_status").FixValue(ctx, AbstractValue.Make(_status(NOW, mode)))
         assert np.all(gate.get_output_port().Eval(ctx) == expect)
+
+
+@pytest.mark.slow
+def test_three_os_processes_in_wall_clock_time():
+    """sim-driver + impedance + planner as OS processes over udpm on loopback, 20 s of wall
+    clock (also `adaptive-c3 bench bridge`). What holds on this machine: the driver
+    expires under 0.1 % of the commands, commands keep the 1 kHz median, plans arrive at
+    > 50 Hz. (Not met yet, README: p99 command period under 2 ms, and rolling the ball -
+    the reference wrist gains with the driver's 30 Hz filter do not reach it.)"""
+    from adaptive_c3.tools.bench.bridge import run_three_processes
+    r = run_three_processes(20.0)
+    print(json.dumps({k: v for k, v in r.items() if k != "processes"}))
+    assert r["commands"] > 10_000
+    assert r["expired_fraction"] < 1e-3
+    assert r["command_period_ms"]["p50"] < 1.5
+    assert r["plan_rate_hz"] > 50

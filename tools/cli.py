@@ -21,6 +21,7 @@ BENCH_SUITES = {   # suite -> module exposing run_bench(quick) -> list of rows
     "lcs": "adaptive_c3.tools.bench.lcs",
     "loop": "adaptive_c3.tools.bench.loop",
     "sweep": "adaptive_c3.tools.bench.sweep",
+    "bridge": "adaptive_c3.tools.bench.bridge",
 }
 
 

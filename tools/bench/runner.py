@@ -31,7 +31,8 @@ def format_table(rows) -> str:
     for r in rows:
         sp = r.get("speedup")
         lines.append(f"{r['name']:44s} {r['median_ms']:10.4f} "
-                     f"{(f'{sp:8.1f}x' if sp is not None else ''):>9s}  {r.get('baseline', '')}")
+                     f"{(f'{sp:8.1f}x' if sp is not None else ''):>9s}  {r.get('baseline', '')}"
+                     + (f"value = {r['value']:.4g}" if "value" in r else ""))
     return "\n".join(lines)
 
 

@@ -1,0 +1,113 @@
+"""`bench bridge`: the hardware run as three OS processes over LCM in wall-clock time.
+
+sim-driver (the true plant with the real driver's rules, real time) + impedance (1 kHz)
++ planner, on udpm on this machine's loopback (`udpm://239.255.76.67:PORT?ttl=0`), the
+ball-rolling scenario with the camera off (the scenario's reference gains, 5 mm radius
+error, adaptation on). A listener in this process records, in the wall clock:
+- every PANDA_COMMAND: its period (row `bridge/command_period_p99_ms`, field `value`,
+  with `median_ms` = the p50 and `max_ms`);
+- every EE_PLAN: its age on arrival, wall clock minus the status utime it was planned
+  from (`bridge/planner_latency_p99_ms`: status -> estimator, LCS, C3 -> plan received);
+  and the plan rate;
+- every BALL_ESTIMATE: the ball's angle about the target circle's centre, whose unwrapped
+  total, counted only while the ball is on the circle's band, gives `bridge/circles_90s`
+  (circle turns per 90 s of run).
+The driver reports how many commands it expired (`bridge/expired_fraction`). Full: 90 s;
+quick: 10 s.
+"""
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+import time
+
+import numpy as np
+
+SETS = ["camera.enabled=false"]
+BAND = 0.03          # m either side of the circle that counts as "on the circle"
+
+
+def _turns(ball_xy: np.ndarray, center, radius) -> float:
+    if len(ball_xy) < 2:
+        return 0.0
+    d = ball_xy - np.asarray(center)
+    ang = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
+    on = np.abs(np.linalg.norm(d, axis=1) - radius) < BAND
+    step = np.diff(ang)
+    return float(abs(np.sum(step[on[1:] & on[:-1]])) / (2 * np.pi))
+
+
+def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SETS,
+                        port: int | None = None) -> dict:
+    from drake import lcmt_robot_state
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.scenarios.schema import load_scenario
+    from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL, decode_ball_estimate
+    from adaptive_c3.tools.user_input import resolve_scenario_path
+    s, _ = load_scenario(resolve_scenario_path(scenario), list(sets))
+    port = port or 7600 + os.getpid() % 300
+    url = f"udpm://239.255.76.67:{port}?ttl=0"
+    exe = [sys.executable, "-m", "adaptive_c3.tools.cli"]
+    args = [scenario, "--lcm-url", url, "--duration", str(duration)]
+    for kv in sets:
+        args += ["--set", kv]
+    lcm = DrakeLcm(url)
+    cmd_t, plan_age, ball = [], [], []
+    lcm.Subscribe("PANDA_COMMAND", lambda d: cmd_t.append(time.monotonic()))
+    lcm.Subscribe(PLAN_CHANNEL, lambda d: plan_age.append(
+        time.time() - 1e-6 * lcmt_robot_state.decode(d).utime))
+
+    def on_ball(d):
+        b = decode_ball_estimate(lcmt_robot_state.decode(d))
+        if np.all(np.isfinite(b)):
+            ball.append(b[:2])
+    lcm.Subscribe("BALL_ESTIMATE", on_ball)
+    procs = {name: subprocess.Popen(exe + [name, *args], stdout=subprocess.PIPE,
+                                    stderr=subprocess.STDOUT, text=True)
+             for name in ("sim-driver", "planner", "impedance")}
+    try:
+        deadline = time.monotonic() + duration + 60
+        while time.monotonic() < deadline and any(p.poll() is None for p in procs.values()):
+            lcm.HandleSubscriptions(5)
+    finally:
+        for p in procs.values():
+            if p.poll() is None:
+                p.terminate()
+    outputs = {n: p.communicate()[0] for n, p in procs.items()}
+    summaries = {}
+    for n, text in outputs.items():
+        lines = [ln for ln in text.strip().splitlines() if ln.startswith("{")]
+        summaries[n] = json.loads(lines[-1]) if lines else {"error": text.strip()[-500:]}
+    periods = np.diff(cmd_t) * 1e3 if len(cmd_t) > 1 else np.array([np.nan])
+    age = np.asarray(plan_age) * 1e3 if plan_age else np.array([np.nan])
+    drv = summaries.get("sim-driver", {})
+    received = drv.get("commands_received", 0)
+    tgt = s.target
+    return dict(duration_s=duration, url=url, commands=len(cmd_t),
+                command_period_ms=dict(p50=float(np.median(periods)),
+                                       p99=float(np.percentile(periods, 99)),
+                                       max=float(np.max(periods))),
+                expired_fraction=(drv.get("commands_expired", 0) / received) if received else 1.0,
+                plan_rate_hz=len(plan_age) / duration,
+                planner_latency_ms=dict(p50=float(np.median(age)), p99=float(np.percentile(age, 99))),
+                circle_turns=_turns(np.asarray(ball), tgt.center, tgt.radius),
+                processes=summaries)
+
+
+def run_bench(quick: bool = False) -> list[dict]:
+    duration = 10.0 if quick else 90.0
+    r = run_three_processes(duration)
+    per = r["command_period_ms"]
+    return [
+        {"name": "bridge/command_period_p99_ms", "median_ms": per["p50"], "value": per["p99"],
+         "max_ms": per["max"], "commands": r["commands"], "duration_s": duration},
+        {"name": "bridge/expired_fraction", "median_ms": per["p50"],
+         "value": r["expired_fraction"]},
+        {"name": "bridge/circles_90s", "median_ms": per["p50"],
+         "value": r["circle_turns"] * 90.0 / duration, "circle_turns": r["circle_turns"]},
+        {"name": "bridge/planner_latency_p99_ms", "median_ms": r["planner_latency_ms"]["p50"],
+         "value": r["planner_latency_ms"]["p99"], "plan_rate_hz": r["plan_rate_hz"]},
+    ]
