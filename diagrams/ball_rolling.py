@@ -206,10 +206,12 @@ class BallRollingController:
 
 def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_force,
                                 ball_position, ball_velocity, *, x_start=None,
-                                ee_start=None) -> BallRollingController:
+                                ee_start=None, transport_s: float = 0.0) -> BallRollingController:
     """Adds steps 4-7 (estimator, LCS, learner, planner) reading the given output ports:
     ee_state (6, EE tip position and velocity in W), ee_force (3, the tip force the
-    impedance controller commands, N in W), ball_position (3) and ball_velocity (3). The same function serves simulation and the LCM bridge."""
+    impedance controller commands, N in W), ball_position (3) and ball_velocity (3). The
+    same function serves simulation and the LCM bridge. transport_s: how long a plan takes
+    to reach the impedance loop (for c3.predict_state with a measured lead)."""
     m = s.model
     gait = make_gait(s)
     if x_start is None:
@@ -261,7 +263,10 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
         gait, c3_options(s, "roll", num_lambda), c3_options(s, "return", num_lambda),
         num_lambda=num_lambda, rate_hz=s.c3.rate_hz,
         ee_ball_rows=tuple(range(num_lambda // 2)), planning_dt=m.planning_dt,
-        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY))
+        feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY,
+        predict_state=s.c3.predict_state,
+        predict_latency_s=s.c3.predict_latency_s if s.c3.predict_latency_s >= 0 else None,
+        transport_s=transport_s))
 
     u_port = planner.GetOutputPort("lcs_input")
     for sys_ in {lcs_sys, loop_sys, learn_sys}:

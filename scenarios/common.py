@@ -23,6 +23,8 @@ class C3Config:
     qp_backend: str = "kkt"        # kkt | osqp
     rho_scale: float = 2.0
     warm_start: bool = True
+    predict_state: bool = False    # plan from the state predicted at the plan's effect time
+    predict_latency_s: float = -1.0  # that lead, s; < 0: measured solve time + transport
     q_diag: List[float] = dc.field(default_factory=list)
     r_diag: List[float] = dc.field(default_factory=list)
     g_diag: List[float] = dc.field(default_factory=list)
@@ -66,6 +68,8 @@ def _validate_common(s) -> None:
          f"c3.projection must be c3plus, qp or exact, got '{c3.projection}'")
     need(c3.qp_backend in ("kkt", "osqp"), f"c3.qp_backend must be kkt or osqp, got '{c3.qp_backend}'")
     need(c3.rho_scale >= 1 and math.isfinite(c3.rho_scale), f"c3.rho_scale must be >= 1, got {c3.rho_scale}")
+    need(math.isfinite(c3.predict_latency_s) and c3.predict_latency_s < 1.0,
+         f"c3.predict_latency_s must be < 1 s (< 0: measured), got {c3.predict_latency_s}")
     for key in ("q_diag", "r_diag", "g_diag", "u_diag"):
         vals = getattr(c3, key)
         need(all(math.isfinite(v) and v >= 0 for v in vals),

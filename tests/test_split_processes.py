@@ -99,3 +99,43 @@ def test_three_os_processes_in_wall_clock_time():
     assert r["expired_fraction"] < 1e-3
     assert r["command_period_ms"]["p50"] < 1.5
     assert r["plan_rate_hz"] > 50
+
+
+def test_predicted_state_moves_ee_and_ball_at_their_velocities():
+    from adaptive_c3.models.ball_rolling_controller_model import (BALL_ANGVEL, BALL_POS,
+                                                                  BALL_QUAT, BALL_VEL,
+                                                                  EE_POS, EE_VEL)
+    from adaptive_c3.systems.rolling.planner import predict_state_ahead
+    x = np.zeros(19)
+    x[BALL_QUAT] = [1, 0, 0, 0]
+    x[EE_POS], x[EE_VEL] = [0.5, 0, 0.1], [0.2, 0, -0.1]
+    x[BALL_POS], x[BALL_VEL], x[BALL_ANGVEL] = [0.55, 0, 0.03], [0, 0.1, 0], [0, 0, 2.0]
+    assert np.array_equal(predict_state_ahead(x, 0.0), x)
+    y = predict_state_ahead(x, 0.05)
+    assert np.allclose(y[EE_POS], [0.51, 0, 0.095]) and np.allclose(y[BALL_POS], [0.55, 0.005, 0.03])
+    assert np.linalg.norm(y[BALL_QUAT]) == pytest.approx(1.0)
+    assert 2 * np.arctan2(y[BALL_QUAT][3], y[BALL_QUAT][0]) == pytest.approx(0.1, rel=1e-3)
+    assert np.array_equal(y[EE_VEL], x[EE_VEL])
+
+
+def test_plan_encoder_delay_holds_each_plan_back():
+    """`planner --delay-ms 10`: what goes out at time t is the plan made 10 ms earlier
+    (within the encoder's 1 ms sampling)."""
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.plan_encoder import PlanEncoder
+    enc = PlanEncoder(delay_s=0.01, period=1e-3)
+    sim = Simulator(enc)
+    ctx = sim.get_mutable_context()
+    enc.GetInputPort("ee.feedforward_force").FixValue(ctx, np.zeros(3))
+    lags = []
+    for k in range(0, 40):
+        enc.GetInputPort("ee.desired_state").FixValue(ctx, [k, 0, 0, 0, 0, 0])
+        enc.GetInputPort("lcmt_panda_status").FixValue(ctx, AbstractValue.Make(_status(NOW + 1000 * k)))
+        sim.AdvanceTo((k + 0.5) * 1e-3)
+        msg = enc.get_output_port().Eval(ctx)
+        if k < 9:
+            assert msg.num_joints == 0                 # nothing 10 ms old yet
+        elif msg.num_joints:
+            lags.append(k - decode_plan(msg)[0])
+    assert len(lags) > 25 and set(lags) <= {10.0, 11.0}

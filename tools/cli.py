@@ -170,9 +170,11 @@ def build_parser() -> argparse.ArgumentParser:
     imp.add_argument("--max-lag-ms", type=float, default=100.0,
                      help="zero torque while the loop runs more than this behind real time")
     imp.add_argument("--period", type=float, default=1e-3, help="command period, s")
-    controller_process("planner", "estimator, Anitescu LCS, residual learner and C3: PANDA_STATUS + "
-                       "BALL_ESTIMATE -> EE_PLAN (drake.lcmt_robot_state: EE target, velocity, "
-                       "feed-forward force)", "cmd_planner")
+    pl = controller_process("planner", "estimator, Anitescu LCS, residual learner and C3: "
+                            "PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN (drake.lcmt_robot_state: EE "
+                            "target, velocity, feed-forward force)", "cmd_planner")
+    pl.add_argument("--delay-ms", type=float, default=0.0,
+                    help="hold every plan back this long before sending it (an injected latency)")
 
     sd = sub.add_parser("sim-driver", help="the simulated robot + ball speaking only LCM (for `hardware`)",
                         description="Runs the true plant (Panda, table, ball; SAP) in real time and "

@@ -56,20 +56,28 @@ def off_table(position) -> bool:
     return bool(np.any(p[:, 2] < TABLE_TOP_Z - 0.01) or np.any(outside))
 
 
+def circle_progress(xy, center, radius: float) -> float:
+    """Turns (counter-clockwise positive) of a ball path [T, 2] about the circle's centre,
+    counted only while the ball is on the circle's band (within BAND x radius of it):
+    cutting across the centre earns nothing."""
+    xy = np.asarray(xy, float)
+    if len(xy) < 2:
+        return 0.0
+    c = np.asarray(center, float)
+    angle = np.unwrap(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]))
+    on_band = np.abs(np.linalg.norm(xy - c, axis=1) - radius) <= BAND * radius
+    return float(np.sum(np.diff(angle) * (on_band[1:] & on_band[:-1])) / (2 * np.pi))
+
+
 def rolling_metrics(logs, scenario, true_radius: float) -> dict:
     """laps, first contact, pushes before it and tracking error from the logs."""
     t, ball = logs["ball_true"]
     _, ee = logs["ee"]
     _, phase = logs["phase"]
-    c = np.asarray(scenario.target.center, float)
-    xy = ball[:, 4:6]
-    angle = np.unwrap(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]))
-    radial = np.linalg.norm(xy - c, axis=1) - scenario.target.radius
-    # progress (rad, counter-clockwise positive) counts only while the ball is on the
-    # circle's band (within half the radius): cutting across the centre earns nothing
-    on_band = np.abs(radial) <= BAND * scenario.target.radius
-    steps = np.diff(angle) * (on_band[1:] & on_band[:-1])
-    progress = float(np.sum(steps))
+    progress = 2 * np.pi * circle_progress(ball[:, 4:6], scenario.target.center,
+                                           scenario.target.radius)
+    radial = (np.linalg.norm(ball[:, 4:6] - np.asarray(scenario.target.center, float), axis=1)
+              - scenario.target.radius)
     gap = (np.linalg.norm(ee[:, :3] - ball[:, 4:7], axis=1) - true_radius
            - scenario.model.ee_radius)
     touching = gap <= CONTACT_TOL_M

@@ -11,6 +11,10 @@ the same tick) it
      from the current state gives the next desired EE position and velocity, clamped
      to the gait's maximum EE speed;
   4. holds the EE command and the plan's EE force until the next tick.
+With `predict_state`, steps 2-3 start from the state predicted at the time the plan
+takes effect (`predict_state_ahead`: constant EE and ball velocities over the lead),
+the lead being `predict_latency_s` or, if None, the median of the last solve times plus
+`transport_s` (the time the plan takes to reach the impedance loop).
 
 Input ports (world frame W, SI units):
   state     (19)       estimated state, models/ball_rolling_controller_model order.
@@ -36,7 +40,9 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 
-from adaptive_c3.models.ball_rolling_controller_model import EE_POS, EE_VEL
+from adaptive_c3.models.ball_rolling_controller_model import (BALL_ANGVEL, BALL_POS,
+                                                              BALL_QUAT, BALL_VEL, EE_POS,
+                                                              EE_VEL)
 from adaptive_c3.systems.c3.solver import C3Options, C3Solver
 from adaptive_c3.systems.contact.lcs import Lcs
 from adaptive_c3.systems.rolling.gait import (PHASES, RollingGait, clamp_ee_command,
@@ -51,7 +57,9 @@ class BallRollingPlanner(LeafSystem):
     def __init__(self, gait: RollingGait, roll_options: C3Options,
                  return_options: C3Options, *, num_lambda: int, rate_hz: float = 80.0,
                  ee_ball_rows=(0, 1, 2, 3), planning_dt: float = 0.1,
-                 feedforward: bool = True, model_ee_weight: float = 0.0):
+                 feedforward: bool = True, model_ee_weight: float = 0.0,
+                 predict_state: bool = False, predict_latency_s: float | None = None,
+                 transport_s: float = 0.0):
         super().__init__()
         self._gait = gait
         self._roll = C3Solver(roll_options)
@@ -65,6 +73,9 @@ class BallRollingPlanner(LeafSystem):
         self._ee_weight = np.array([0.0, 0.0, float(model_ee_weight)])
         self.solve_times: list[float] = []
         self.failures = 0
+        self._predict = bool(predict_state)
+        self._lead_s = predict_latency_s
+        self._transport_s = float(transport_s)
 
         self._x_port = self.DeclareVectorInputPort("state", N_X)
         self._lcs_port = self.DeclareAbstractInputPort("lcs", AbstractValue.Make(None))
@@ -132,6 +143,8 @@ class BallRollingPlanner(LeafSystem):
             self._hold(state, x, iphase)
             return EventStatus.Succeeded()
         r = self._residual(context)
+        if self._predict:
+            x = predict_state_ahead(x, self.lead_s())
         gap = self.gap_offset(r)
         target = self._gait.target_state(phase, x, gap)
         if phase != "roll" and self._gait.s.return_mode == "waypoint":
@@ -175,6 +188,13 @@ class BallRollingPlanner(LeafSystem):
                               target[7:9]])
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
 
+    def lead_s(self) -> float:
+        """How far ahead the plan's start state is predicted, s."""
+        if self._lead_s is not None:
+            return float(self._lead_s)
+        recent = self.solve_times[-20:]
+        return (float(np.median(recent)) if recent else 0.0) + self._transport_s
+
     # ------------------------------------------------------------------ accessors
     def solution(self, context):
         """The latest C3Solution in this context (None before the first)."""
@@ -189,4 +209,20 @@ class BallRollingPlanner(LeafSystem):
                 "max_s": float(t.max())}
 
 
-__all__ = ["BallRollingPlanner"]
+def predict_state_ahead(x: np.ndarray, lead_s: float) -> np.ndarray:
+    """The 19-state lead_s seconds on at constant velocities: EE and ball positions move
+    with their velocities, the ball's quaternion turns with its angular velocity (world
+    frame, q_dot = 0.5 [0, w] (x) q)."""
+    x = np.array(x, float)
+    if lead_s <= 0:
+        return x
+    x[EE_POS] += lead_s * x[EE_VEL]
+    x[BALL_POS] += lead_s * x[BALL_VEL]
+    w, q = x[BALL_ANGVEL], x[BALL_QUAT]
+    dq = 0.5 * np.r_[-w @ q[1:], q[0] * w + np.cross(w, q[1:])]
+    q = q + lead_s * dq
+    x[BALL_QUAT] = q / np.linalg.norm(q)
+    return x
+
+
+__all__ = ["BallRollingPlanner", "predict_state_ahead"]

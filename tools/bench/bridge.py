@@ -26,17 +26,6 @@ import time
 import numpy as np
 
 SETS = ["camera.enabled=false"]
-BAND = 0.03          # m either side of the circle that counts as "on the circle"
-
-
-def _turns(ball_xy: np.ndarray, center, radius) -> float:
-    if len(ball_xy) < 2:
-        return 0.0
-    d = ball_xy - np.asarray(center)
-    ang = np.unwrap(np.arctan2(d[:, 1], d[:, 0]))
-    on = np.abs(np.linalg.norm(d, axis=1) - radius) < BAND
-    step = np.diff(ang)
-    return float(abs(np.sum(step[on[1:] & on[:-1]])) / (2 * np.pi))
 
 
 def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SETS,
@@ -46,6 +35,7 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
 
     from adaptive_c3.scenarios.schema import load_scenario
     from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL, decode_ball_estimate
+    from adaptive_c3.tools.run_ball_rolling import circle_progress
     from adaptive_c3.tools.user_input import resolve_scenario_path
     s, _ = load_scenario(resolve_scenario_path(scenario), list(sets))
     port = port or 7600 + os.getpid() % 300
@@ -93,7 +83,7 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
                 expired_fraction=(drv.get("commands_expired", 0) / received) if received else 1.0,
                 plan_rate_hz=len(plan_age) / duration,
                 planner_latency_ms=dict(p50=float(np.median(age)), p99=float(np.percentile(age, 99))),
-                circle_turns=_turns(np.asarray(ball), tgt.center, tgt.radius),
+                circle_turns=max(circle_progress(ball, tgt.center, tgt.radius), 0.0),
                 processes=summaries)
 
 

@@ -65,7 +65,7 @@ def add_ball_input(builder, lcm, s, period: float):
     return ball
 
 
-def add_planner(builder, s, ctrl, ball):
+def add_planner(builder, s, ctrl, ball, transport_s: float = 0.0):
     """The ball-rolling controller (estimator, Anitescu LCS, learner, C3) on the impedance
     controller's EE state and the decoded ball, its EE target fed back to `ctrl` (whose
     commanded force is then the learner's applied-force input). Returns the controller."""
@@ -73,7 +73,8 @@ def add_planner(builder, s, ctrl, ball):
     c = add_ball_rolling_controller(builder, s, ctrl.GetOutputPort("ee.state"),
                                     ctrl.GetOutputPort("ee.commanded_force"),
                                     ball.GetOutputPort("ball.position"),
-                                    ball.GetOutputPort("ball.velocity"))
+                                    ball.GetOutputPort("ball.velocity"),
+                                    transport_s=transport_s)
     builder.Connect(c.ee_desired_state, ctrl.GetInputPort("ee.desired_state"))
     builder.Connect(c.ee_feedforward_force, ctrl.GetInputPort("ee.feedforward_force"))
     return c

@@ -23,8 +23,10 @@ class PlannerProcess:
     ball: object             # BallEstimateDecoder
 
 
-def build_planner_process(s, lcm, *, plan_period: float = 0.005,
-                          ball_period: float = 2e-3) -> PlannerProcess:
+def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: float = 2e-3,
+                          delay_s: float = 0.0, transport_s: float = 1e-3) -> PlannerProcess:
+    """delay_s: an injected latency on every plan (`--delay-ms`); transport_s: the rest of
+    the way to the impedance loop (LCM), for c3.predict_state's measured lead."""
     from drake import lcmt_robot_state
     from pydrake.systems.lcm import LcmPublisherSystem
 
@@ -39,8 +41,8 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005,
     kin = builder.AddSystem(make_impedance_controller(s))     # for ee.state / commanded force
     builder.Connect(status.arm_state, kin.GetInputPort("panda.state"))
     ball = add_ball_input(builder, lcm, s, period=ball_period)
-    c = add_planner(builder, s, kin, ball)
-    enc = builder.AddSystem(PlanEncoder())
+    c = add_planner(builder, s, kin, ball, transport_s=delay_s + transport_s)
+    enc = builder.AddSystem(PlanEncoder(delay_s))
     builder.Connect(c.ee_desired_state, enc.GetInputPort("ee.desired_state"))
     builder.Connect(c.ee_feedforward_force, enc.GetInputPort("ee.feedforward_force"))
     builder.Connect(status.status, enc.GetInputPort("lcmt_panda_status"))

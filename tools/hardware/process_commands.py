@@ -31,7 +31,10 @@ def cmd_planner(args) -> int:
     from adaptive_c3.tools.hardware.lcm_channels import open_lcm
     from adaptive_c3.tools.hardware.planner_process import build_planner_process
     s, _, duration = load_hardware_scenario(args)
-    proc = build_planner_process(s, open_lcm(args.lcm_url))
+    from adaptive_c3.tools.user_input import UserError
+    if not (0 <= args.delay_ms < 1000):
+        raise UserError(f"--delay-ms must be in [0, 1000), got {args.delay_ms}")
+    proc = build_planner_process(s, open_lcm(args.lcm_url), delay_s=args.delay_ms * 1e-3)
     ctx, wall = run_realtime(proc.diagram, duration,
                               f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}")
     out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,

@@ -12,7 +12,7 @@ import time
 
 
 def run_split_loopback(s, duration: float, *, step: float = 1e-3, low_pass_hz: float = 30.0,
-                       stale_s: float = 0.05) -> dict:
+                       stale_s: float = 0.05, delay_s: float = 0.0) -> dict:
     from pydrake.lcm import DrakeLcm
     from pydrake.systems.analysis import Simulator
 
@@ -21,7 +21,7 @@ def run_split_loopback(s, duration: float, *, step: float = 1e-3, low_pass_hz: f
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
     lcm = DrakeLcm("memq://")
     drv = build_sim_driver(s, lcm, low_pass_hz=low_pass_hz)
-    planner = build_planner_process(s, lcm)
+    planner = build_planner_process(s, lcm, delay_s=delay_s, transport_s=step)
     imp = build_impedance_process(s, lcm, stale_s=stale_s)
     sims = [Simulator(d) for d in (drv.diagram, planner.diagram, imp.diagram)]
     for sim in sims:
