@@ -272,6 +272,14 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
     return report
 
 
+def embedded_figures(files) -> str:
+    """HTML figures with the PNG files inlined (a report is one self-contained file)."""
+    return "".join(
+        f"<figure><img src='data:image/png;base64,{base64.b64encode(Path(f).read_bytes()).decode()}'"
+        f" style='max-width:100%'><figcaption>{html.escape(Path(f).name)}</figcaption></figure>"
+        for f in files)
+
+
 def _write_html(path: Path, report: dict, files: list) -> None:
     esc = html.escape
     rows = "".join(
@@ -289,10 +297,7 @@ def _write_html(path: Path, report: dict, files: list) -> None:
         f"<td>{esc(json.dumps(w['contact']))}</td></tr>" for w in report["mismatch_windows"])
     na = "".join(f"<li><b>{esc(n['name'])}</b>: {esc(n['reason'])}</li>"
                  for n in report["not_applicable"])
-    imgs = "".join(
-        f"<figure><img src='data:image/png;base64,{base64.b64encode(Path(f).read_bytes()).decode()}'"
-        f" style='max-width:100%'><figcaption>{esc(Path(f).name)}</figcaption></figure>"
-        for f in files)
+    imgs = embedded_figures(files)
     path.write_text(f"""<!doctype html><html><head><meta charset="utf-8">
 <title>adaptive-c3 diagnose: {esc(report['model'])}</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}

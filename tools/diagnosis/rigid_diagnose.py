@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from adaptive_c3.models.rigid_object import RigidObjectParams
+from adaptive_c3.tools.diagnosis.rigid_model import key_value
 from adaptive_c3.tools.diagnosis.episodes import find_twins, split_episodes, twin_groups
 from adaptive_c3.tools.diagnosis.evaluate import (episode_errors, recording_episodes,
                                                   summarise)
@@ -87,15 +88,11 @@ NOT_IDENTIFIABLE = {
 
 # ------------------------------------------------------------------ scoring
 def with_values(scenario, values: dict):
-    """A copy of the scenario with `section.field` keys set (r_comp as a one-entry list)."""
+    """A copy of the scenario with `section.field` keys set (key_value's types)."""
     s = copy.deepcopy(scenario)
     for key, v in values.items():
         section, field = key.split(".")
-        if field == "r_comp":
-            v = [float(v)]
-        elif field == "friction_edges":
-            v = int(round(v))
-        setattr(getattr(s, section), field, v if isinstance(v, (list, int)) else float(v))
+        setattr(getattr(s, section), field, key_value(key, v))
     return s
 
 

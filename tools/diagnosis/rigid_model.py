@@ -25,6 +25,17 @@ from adaptive_c3.models.rigid_object import (RigidObjectParams, plant_state, qua
 from adaptive_c3.systems.contact.lcp import solve_lcp
 
 
+def key_value(key: str, v):
+    """An effect's value in the type its scenario key holds (r_comp: a one-entry list,
+    friction_edges: an integer, the rest: floats)."""
+    field = key.split(".")[1]
+    if field == "r_comp":
+        return [float(v)]
+    if field == "friction_edges":
+        return int(round(v))
+    return float(v)
+
+
 class RigidModelError(ValueError):
     """The model could not be stepped (an LCP without a solution)."""
 

@@ -2,13 +2,14 @@
 patched scenario, and the plain-words summary (tools/diagnosis/rigid_diagnose.py)."""
 from __future__ import annotations
 
-import base64
 import html
 import json
 from pathlib import Path
 
 import numpy as np
 import yaml
+
+from adaptive_c3.tools.diagnosis.report import embedded_figures
 
 
 def _sure(gain: dict) -> str:
@@ -42,15 +43,10 @@ def plain_summary(result: dict) -> str:
 
 def patched_scenario_text(scenario_text: str, chosen: dict) -> str:
     data = yaml.safe_load(scenario_text) or {}
+    from adaptive_c3.tools.diagnosis.rigid_model import key_value
     for key, value in chosen.items():
         section, field = key.split(".")
-        if field == "r_comp":
-            value = [float(value)]
-        elif field == "friction_edges":
-            value = int(round(value))
-        else:
-            value = float(value)
-        data.setdefault(section, {})[field] = value
+        data.setdefault(section, {})[field] = key_value(key, value)
     notes = ", ".join(f"{k} = {v:.4g}" for k, v in chosen.items()) or "no effect selected"
     return ("# written by adaptive-c3 diagnose: " + notes + "\n"
             + yaml.safe_dump(data, sort_keys=False))
@@ -164,10 +160,7 @@ def write_report(out: Path, result: dict, scenario_text: str, rollouts: dict) ->
         f"<td>{v['orientation_deg_mean_median']:.2f}</td></tr>" for k, v in report["held_out"].items())
     na = "".join(f"<li><b>{esc(n['name'])}</b>: {esc(n['reason'])}</li>"
                  for n in report["not_identifiable"])
-    imgs = "".join(
-        f"<figure><img src='data:image/png;base64,{base64.b64encode(Path(f).read_bytes()).decode()}'"
-        f" style='max-width:100%'><figcaption>{esc(Path(f).name)}</figcaption></figure>"
-        for f in files)
+    imgs = embedded_figures(files)
     s = report["split"]
     (out / "report.html").write_text(f"""<!doctype html><html><head><meta charset="utf-8">
 <title>adaptive-c3 diagnose: rigid object</title>
