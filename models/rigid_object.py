@@ -128,6 +128,13 @@ def quat_to_matrix(q: np.ndarray) -> np.ndarray:
     ], -2)
 
 
+def quaternion_rate(q: np.ndarray, w_world: np.ndarray) -> np.ndarray:
+    """q_dot (w, x, y, z) of a unit quaternion turning at w_world (rad/s, world frame):
+    0.5 [0, w] (x) q."""
+    q, w = np.asarray(q, float), np.asarray(w_world, float)
+    return 0.5 * np.r_[-w @ q[1:], q[0] * w + np.cross(w, q[1:])]
+
+
 def plant_state(x_rec: np.ndarray) -> np.ndarray:
     """Recording layout -> plant layout (quaternion normalised, omega to world)."""
     x_rec = np.asarray(x_rec, float)

@@ -43,6 +43,7 @@ from pydrake.systems.framework import BasicVector, EventStatus, LeafSystem
 from adaptive_c3.models.ball_rolling_controller_model import (BALL_ANGVEL, BALL_POS,
                                                               BALL_QUAT, BALL_VEL, EE_POS,
                                                               EE_VEL)
+from adaptive_c3.models.rigid_object import quaternion_rate
 from adaptive_c3.systems.c3.solver import C3Options, C3Solver
 from adaptive_c3.systems.contact.lcs import Lcs
 from adaptive_c3.systems.rolling.gait import (PHASES, RollingGait, clamp_ee_command,
@@ -218,9 +219,7 @@ def predict_state_ahead(x: np.ndarray, lead_s: float) -> np.ndarray:
         return x
     x[EE_POS] += lead_s * x[EE_VEL]
     x[BALL_POS] += lead_s * x[BALL_VEL]
-    w, q = x[BALL_ANGVEL], x[BALL_QUAT]
-    dq = 0.5 * np.r_[-w @ q[1:], q[0] * w + np.cross(w, q[1:])]
-    q = q + lead_s * dq
+    q = x[BALL_QUAT] + lead_s * quaternion_rate(x[BALL_QUAT], x[BALL_ANGVEL])
     x[BALL_QUAT] = q / np.linalg.norm(q)
     return x
 

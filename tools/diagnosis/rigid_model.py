@@ -21,7 +21,8 @@ import numpy as np
 
 from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
 from adaptive_c3.models.rigid_object import (RigidObjectParams, plant_state, quat_to_matrix,
-                                             recording_state, rigid_object_linearizer)
+                                             quaternion_rate, recording_state,
+                                             rigid_object_linearizer)
 from adaptive_c3.systems.contact.lcp import solve_lcp
 
 
@@ -66,9 +67,8 @@ class RigidObjectModel:
         self.r_comp = np.zeros(m) + (r if r.size else 0.0)
         self.restitution = float(scenario.patch.restitution)
         self.torsional_friction = float(scenario.patch.torsional_friction)
-        self._inertia_body = np.diag(self.params.inertia_diag)
+        self._inertia_body_inv = np.diag(1.0 / np.asarray(self.params.inertia_diag))
         self._u = np.zeros(0)
-        self.lcp_failures = 0
 
     @property
     def size(self) -> float:
@@ -99,15 +99,14 @@ class RigidObjectModel:
         reversing it; the orientation step is redone with the changed spin."""
         nq = self.linearizer.nq
         R = quat_to_matrix(x[:4])
-        I_inv = R @ np.linalg.inv(self._inertia_body) @ R.T       # world frame
+        I_inv = R @ self._inertia_body_inv @ R.T       # world frame
         wz = x_next[nq + 2]
         if wz == 0.0:
             return
         tau = min(self.torsional_friction * normal_impulse, abs(wz) / I_inv[2, 2])
         dw = -np.sign(wz) * tau * I_inv[:, 2]
         x_next[nq:nq + 3] += dw
-        w, v = x[0], x[1:4]        # q_dot = 0.5 [0, w_world] (x) q, the part from dw
-        x_next[:4] += 0.5 * self.dt * np.r_[-dw @ v, w * dw + np.cross(dw, v)]
+        x_next[:4] += self.dt * quaternion_rate(x[:4], dw)    # the part of q_dot from dw
 
     def _solve(self, F, q, phi, x, J_n) -> np.ndarray:
         m = q.size
@@ -121,7 +120,6 @@ class RigidObjectModel:
             if rows.size:
                 res = solve_lcp(F[np.ix_(rows, rows)], q[rows])
                 if not _acceptable(res, q[rows]):
-                    self.lcp_failures += 1
                     raise RigidModelError(f"the model's LCP has no solution ({res.message})")
                 lam[:] = 0.0
                 lam[rows] = res.z
@@ -132,7 +130,6 @@ class RigidObjectModel:
             rows = np.union1d(rows, np.flatnonzero(np.isin(np.arange(m) // ne, bad // ne)))
         res = solve_lcp(F, q)
         if not _acceptable(res, q):
-            self.lcp_failures += 1
             raise RigidModelError(f"the model's LCP has no solution ({res.message})")
         return res.z
 
