@@ -22,8 +22,7 @@ NOW = 1_764_000_000_000_000
 
 @pytest.mark.parametrize("low_pass_hz, extra", [
     (100.0, []),                                   # libfranka's default cutoff
-    (30.0, ["impedance.rotational_stiffness=200",  # the driver's 30 Hz with softer wrist
-            "impedance.rotational_damping=5"]),    # gains (900/20 does not reach the ball)
+    (30.0, []),                                    # the driver's, reference gains 900/20
 ])
 def test_three_parts_over_lcm_roll_the_ball(low_pass_hz, extra):
     s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST + extra)
@@ -139,3 +138,78 @@ def test_plan_encoder_delay_holds_each_plan_back():
         elif msg.num_joints:
             lags.append(k - decode_plan(msg)[0])
     assert len(lags) > 25 and set(lags) <= {10.0, 11.0}
+
+
+def _ee_tip(q):
+    from adaptive_c3.systems.franka.impedance_controller import ArmModel
+    arm = ArmModel()
+    arm.set_state(np.asarray(q, float), np.zeros(7))
+    return arm.tip_pose()[0]
+
+
+def test_planner_starts_from_the_robots_first_status():
+    """Regression: a planner initialised before any PANDA_STATUS latched the empty
+    message's q = 0 (tip 0.7 m above the ball) and walked its target from there, which
+    threw the arm at the elbow limit with the driver's 30 Hz filter."""
+    from pydrake.lcm import DrakeLcm
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.planner_process import build_planner_process
+    from adaptive_c3.tools.hardware.sim_driver import build_sim_driver
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    out = run_split_loopback(s, 0.02)
+    h = out["_"]
+    q0 = h["driver"].logs["panda_state"].FindLog(h["sims"][0].get_context()).data()[:7, 0]
+    port = h["planner"].controller.ee_desired_state
+
+    def target_offset(sim):
+        ctx = port.get_system().GetMyContextFromRoot(sim.get_context())
+        return float(np.linalg.norm(port.Eval(ctx)[:3] - _ee_tip(q0)))
+    assert target_offset(h["sims"][1]) < 0.01
+    # the same check on a planner initialised the old way (before its first status)
+    lcm = DrakeLcm("memq://")
+    drv = build_sim_driver(s, lcm)
+    planner = build_planner_process(s, lcm)
+    sims = [Simulator(drv.diagram), Simulator(planner.diagram)]
+    for sim in sims:
+        sim.Initialize()
+    for k in range(1, 21):
+        for sim in sims:
+            sim.AdvanceTo(k * 1e-3)
+    port = planner.controller.ee_desired_state
+    assert target_offset(sims[1]) > 0.3
+
+
+def test_status_driven_loop_ticks_per_status_and_zeroes_on_silence():
+    """The impedance loop runs one tick per PANDA_STATUS and, when the statuses stop,
+    goes on ticking on the clock: its watchdog zeroes the torque after the stale limit."""
+    from drake import lcmt_panda_command, lcmt_panda_status
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
+    from adaptive_c3.tools.hardware.realtime import run_status_driven
+    from adaptive_c3.tools.hardware.status_sender import status_message
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    lcm = DrakeLcm("memq://")
+    proc = build_impedance_process(s, lcm, stale_s=0.05)
+    clock = {"t": 0.0, "calls": 0}
+    commands = []
+    lcm.Subscribe("PANDA_COMMAND", lambda d: commands.append(lcmt_panda_command.decode(d)))
+
+    def status(utime):
+        q = np.asarray(s.impedance.q_null, float)
+        return status_message(utime, q, np.zeros(7), np.zeros(7), lcmt_panda_status.kMove)
+
+    def handle():                # 200 statuses 1 ms apart, then silence
+        clock["calls"] += 1
+        clock["t"] += 1e-3
+        if clock["calls"] <= 200:
+            lcm.Publish("PANDA_STATUS", status(NOW + 1000 * clock["calls"]).encode())
+        lcm.HandleSubscriptions(0)
+    ctx, _, driven = run_status_driven(proc.diagram, lcm, "PANDA_STATUS", 0.4, "test",
+                                       clock=lambda: clock["t"], handle=handle)
+    assert driven == 200
+    assert commands and all(c.utime <= NOW + 200_000 for c in commands)
+    report = proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx))
+    assert report["mode"] == "stale" and report["counts"]["stale"] > 100
+    assert max(abs(t) for t in commands[-1].joint_torque) == 0.0

@@ -146,6 +146,8 @@ def build_parser() -> argparse.ArgumentParser:
     hw.add_argument("--max-lag-ms", type=float, default=100.0,
                     help="watchdog: zero torque while the controller runs more than this behind real time")
     hw.add_argument("--period", type=float, default=1e-3, help="command (and watchdog) period, s")
+    hw.add_argument("--rt-priority", type=int, default=70,
+                    help="--split: SCHED_FIFO priority of the impedance loop (0: ordinary)")
     hw.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
     hw.add_argument("--loopback", action="store_true",
                     help="run the bridge and the simulated driver in one process over memq://, "
@@ -167,9 +169,10 @@ def build_parser() -> argparse.ArgumentParser:
         "impedance", "the 1 kHz loop alone: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND (torque mode, "
         "stamped with the status utime), watchdog, plan hold/timeout, robot_mode gate", "cmd_impedance")
     imp.add_argument("--stale-ms", type=float, default=50.0, help="status older than this -> zero torque")
-    imp.add_argument("--max-lag-ms", type=float, default=100.0,
-                     help="zero torque while the loop runs more than this behind real time")
-    imp.add_argument("--period", type=float, default=1e-3, help="command period, s")
+    imp.add_argument("--period", type=float, default=1e-3,
+                     help="tick, s: one per PANDA_STATUS, or per period of silence")
+    imp.add_argument("--rt-priority", type=int, default=70,
+                     help="SCHED_FIFO priority of the loop (0: ordinary scheduling)")
     pl = controller_process("planner", "estimator, Anitescu LCS, residual learner and C3: "
                             "PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN (drake.lcmt_robot_state: EE "
                             "target, velocity, feed-forward force)", "cmd_planner")
@@ -189,6 +192,8 @@ def build_parser() -> argparse.ArgumentParser:
     sd.add_argument("--low-pass-hz", type=float, default=30.0,
                     help="first-order low-pass of the torque command (the real driver's "
                     "--low_pass_freq; >= 1000: off)")
+    sd.add_argument("--rt-priority", type=int, default=80,
+                    help="SCHED_FIFO priority, as libfranka's control thread (0: ordinary)")
     sd.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
     sd.set_defaults(func=_delegate("adaptive_c3.tools.hardware.sim_driver", "cmd_sim_driver"))
 

@@ -138,6 +138,7 @@ def run_loopback(s, duration: float, *, stop_driver_at: float | None = None,
     from pydrake.lcm import DrakeLcm
     from pydrake.systems.analysis import Simulator
 
+    from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
 
     lcm = DrakeLcm("memq://")
@@ -146,8 +147,9 @@ def run_loopback(s, duration: float, *, stop_driver_at: float | None = None,
     clock = {"t": 0.0}
     rec = LcmRecorder(lcm, log_path, clock=lambda: clock["t"]) if log_path else None
     sim_d, sim_b = Simulator(drv.diagram), Simulator(bridge.diagram)
-    sim_d.Initialize()
-    sim_b.Initialize()
+    sim_d.Initialize()                  # publishes the first status and ball estimate
+    start_from_first_messages(sim_b, lcm, [STATUS_CHANNEL, BALL_CHANNEL],
+                              pump=lambda: lcm.HandleSubscriptions(0), timeout_s=0.0)
     cmds = []   # (t, |tau|_inf) of each command the bridge published, seen from outside
 
     def on_cmd(data):
@@ -215,7 +217,8 @@ def cmd_hardware(args) -> int:
     ctx, wall = run_realtime(
         bridge.diagram, duration,
         f"hardware: bridge on {args.lcm_url}: {STATUS_CHANNEL} + {BALL_CHANNEL} -> "
-        f"{COMMAND_CHANNEL}; watchdog {args.stale_ms:g} ms", on_stop=rec.close if rec else None)
+        f"{COMMAND_CHANNEL}; watchdog {args.stale_ms:g} ms", on_stop=rec.close if rec else None,
+        wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]))
     wd_ctx = bridge.watchdog.GetMyContextFromRoot(ctx)
     out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
            "watchdog": bridge.watchdog.report(wd_ctx)}

@@ -13,6 +13,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numpy as np
+
 from pydrake.systems.framework import DiagramBuilder
 
 
@@ -21,6 +23,27 @@ class PlannerProcess:
     diagram: object
     controller: object       # BallRollingController
     ball: object             # BallEstimateDecoder
+    gait: object             # the planner's Gait (its phase schedule, diagram time)
+
+    def summary(self, context) -> dict:
+        """C3 solve times (ms), learner steps and rate, and the gait's roll-phase starts
+        (diagram time, s) up to the context's time."""
+        c = self.controller
+        solve_ms = np.asarray(c.planner.solve_times, float) * 1e3
+        t = float(context.get_time())
+        steps = c.learner.num_steps(c.learner.GetMyContextFromRoot(context))
+        g = self.gait
+        starts = []
+        while g.t0 + g.s.settle_s + len(starts) * g.period <= t:
+            starts.append(g.t0 + g.s.settle_s + len(starts) * g.period)
+        return {"c3_solves": int(solve_ms.size),
+                "c3_solve_ms": {"p50": float(np.median(solve_ms)) if solve_ms.size else None,
+                                "p99": (float(np.percentile(solve_ms, 99))
+                                        if solve_ms.size else None)},
+                "plan_rate_hz": solve_ms.size / t if t > 0 else 0.0,
+                "learner_steps": int(steps),
+                "learner_rate_hz": steps / t if t > 0 else 0.0,
+                "roll_starts_s": starts, **self.ball.counts(self.ball.GetMyContextFromRoot(context))}
 
 
 def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: float = 2e-3,
@@ -30,7 +53,7 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
     from drake import lcmt_robot_state
     from pydrake.systems.lcm import LcmPublisherSystem
 
-    from adaptive_c3.diagrams.ball_rolling import make_impedance_controller
+    from adaptive_c3.diagrams.ball_rolling import make_gait, make_impedance_controller
     from adaptive_c3.tools.hardware.controller_pieces import (add_ball_input, add_lcm,
                                                               add_planner, add_status_input)
     from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL
@@ -51,4 +74,4 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
     builder.Connect(enc.get_output_port(), pub.get_input_port())
     diagram = builder.Build()
     diagram.set_name(f"planner[{s.name}]")
-    return PlannerProcess(diagram, c, ball)
+    return PlannerProcess(diagram, c, ball, make_gait(s))   # the schedule the planner's gait keeps

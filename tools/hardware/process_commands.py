@@ -10,16 +10,21 @@ import time
 
 
 def cmd_impedance(args) -> int:
-    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_realtime
+    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_status_driven
     from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
-    from adaptive_c3.tools.hardware.lcm_channels import open_lcm
+    from adaptive_c3.tools.hardware.lcm_channels import STATUS_CHANNEL, open_lcm
+    from adaptive_c3.tools.hardware.realtime_priority import request_fifo
     s, _, duration = load_hardware_scenario(args)
-    proc = build_impedance_process(s, open_lcm(args.lcm_url), command_period=args.period,
-                                   stale_s=args.stale_ms * 1e-3,
-                                   max_lag_s=args.max_lag_ms * 1e-3)
-    ctx, wall = run_realtime(proc.diagram, duration,
-                              f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}")
-    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
+    lcm = open_lcm(args.lcm_url)
+    scheduling = request_fifo(args.rt_priority)
+    proc = build_impedance_process(s, lcm, command_period=args.period,
+                                   stale_s=args.stale_ms * 1e-3)
+    ctx, wall, driven = run_status_driven(
+        proc.diagram, lcm, STATUS_CHANNEL, duration,
+        f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}",
+        tick_s=args.period, wait_for=(lcm, [STATUS_CHANNEL]))
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(), "status_ticks": driven,
+           "scheduling": scheduling,
            "watchdog": proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx)),
            **proc.plan.counts(proc.plan.GetMyContextFromRoot(ctx))}
     print(json.dumps(out, default=float), flush=True)
@@ -28,17 +33,21 @@ def cmd_impedance(args) -> int:
 
 def cmd_planner(args) -> int:
     from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_realtime
-    from adaptive_c3.tools.hardware.lcm_channels import open_lcm
+    from adaptive_c3.tools.hardware.lcm_channels import BALL_CHANNEL, STATUS_CHANNEL, open_lcm
     from adaptive_c3.tools.hardware.planner_process import build_planner_process
     s, _, duration = load_hardware_scenario(args)
     from adaptive_c3.tools.user_input import UserError
     if not (0 <= args.delay_ms < 1000):
         raise UserError(f"--delay-ms must be in [0, 1000), got {args.delay_ms}")
-    proc = build_planner_process(s, open_lcm(args.lcm_url), delay_s=args.delay_ms * 1e-3)
+    lcm = open_lcm(args.lcm_url)
+    proc = build_planner_process(s, lcm, delay_s=args.delay_ms * 1e-3)
+    start_epoch_s = []      # wall clock at diagram time 0 (to line up with the driver's)
     ctx, wall = run_realtime(proc.diagram, duration,
-                              f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}")
-    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
-           **proc.ball.counts(proc.ball.GetMyContextFromRoot(ctx))}
+                             f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}",
+                             wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]),
+                             on_start=lambda: start_epoch_s.append(time.time()))
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(),
+           "start_epoch_s": start_epoch_s[0], **proc.summary(ctx)}
     print(json.dumps(out, default=float), flush=True)
     return 0
 
@@ -53,8 +62,8 @@ def run_split(args) -> int:
         common += ["--duration", str(args.duration)]
     exe = [sys.executable, "-m", "adaptive_c3.tools.cli"]
     procs = [subprocess.Popen(exe + ["impedance", *common, "--stale-ms", str(args.stale_ms),
-                                     "--max-lag-ms", str(args.max_lag_ms),
-                                     "--period", str(args.period)]),
+                                     "--period", str(args.period),
+                                     "--rt-priority", str(args.rt_priority)]),
              subprocess.Popen(exe + ["planner", *common])]
     try:
         while all(p.poll() is None for p in procs):

@@ -29,12 +29,23 @@ def load_hardware_scenario(args):
     return s, text, duration
 
 
-def run_realtime(diagram, duration, label: str, on_stop=None):
-    """Advance in real time until `duration` (None: Ctrl-C); returns (context, wall s)."""
+def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_start=None):
+    """Advance in real time until `duration` (None: Ctrl-C); returns (context, wall s).
+    wait_for = (lcm, channels): initialise only once each channel has delivered a
+    message, with those messages in the context (first_messages.py). on_start(): called
+    right after initialisation (diagram time 0)."""
     from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
     sim = Simulator(diagram)
     sim.set_target_realtime_rate(1.0)
-    sim.Initialize()
+    if wait_for is None:
+        sim.Initialize()
+    else:
+        print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
+        start_from_first_messages(sim, *wait_for)
+    if on_start:
+        on_start()
     print(label + (f" for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
     start, t = time.perf_counter(), 0.0
     try:
@@ -47,3 +58,52 @@ def run_realtime(diagram, duration, label: str, on_stop=None):
         if on_stop:
             on_stop()
     return sim.get_context(), time.perf_counter() - start
+
+
+def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
+                      tick_s: float = 1e-3, wait_for=None, clock=time.monotonic,
+                      handle=None):
+    """Advance `diagram` one tick (tick_s of diagram time) per new message on `channel`,
+    or per tick_s of wall clock without one; returns (context, wall s, ticks driven by
+    a message).
+
+    The 1 kHz loop of a real Franka controller runs once per robot status (libfranka's
+    callback; dairlib's LcmDrivenLoop): each status is answered at once from its own
+    state, with no pacing clock of ours between them. A tick absorbs the message
+    (the subscribers' update at the tick's start), runs the controller's periodic
+    updates and publishes the command from the new status within the same AdvanceTo.
+    Without a status the loop still ticks on the wall clock, so the watchdog sees the
+    silence and zeroes the torque after its stale limit. clock (s) and handle() (default
+    lcm.HandleSubscriptions(1): returns on a message or after 1 ms) are injectable for
+    tests."""
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
+    sim = Simulator(diagram)
+    if wait_for is None:
+        sim.Initialize()
+    else:
+        print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
+        start_from_first_messages(sim, *wait_for)
+    fresh = [0]
+
+    def on_message(_data):
+        fresh[0] += 1
+    lcm.Subscribe(channel, on_message)
+    print(label + (f" for {duration:g} s" if duration else "; Ctrl-C to stop")
+          + f"; one tick per {channel}", flush=True)
+    handle = handle or (lambda: lcm.HandleSubscriptions(1))
+    start = last = clock()
+    k = driven = 0
+    try:
+        while duration is None or last - start < duration:
+            handle()
+            now = clock()
+            if not fresh[0] and now - last < tick_s:
+                continue
+            driven += fresh[0] > 0
+            fresh[0], last, k = 0, now, k + 1
+            sim.AdvanceTo(k * tick_s)
+    except KeyboardInterrupt:
+        pass
+    return sim.get_context(), clock() - start, driven

@@ -71,8 +71,9 @@ class SimDriver:
     plant: object
     command: object         # FrankaTorqueDriver
     logs: dict              # name -> VectorLogSink: ball_true (13), panda_state (14), tau (7)
-    true_radius: float
+    true_radius: float      # m, the true ball
     ball_start: np.ndarray
+    ee_radius: float        # m, the EE tip sphere
 
 
 def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float = 0.1,
@@ -155,12 +156,14 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
         logs[name] = sink
     diagram = builder.Build()
     diagram.set_name(f"sim_driver[{s.name}]")
-    return SimDriver(diagram, plant, cmd, logs, R_true, np.r_[start_xy, R_true])
+    return SimDriver(diagram, plant, cmd, logs, R_true, np.r_[start_xy, R_true], m.ee_radius)
 
 
 def driver_summary(drv: SimDriver, context) -> dict:
-    """Ball displacement and EE-ball approach from the driver's logs."""
+    """Ball displacement, EE-ball approach and first contact (driver time, s: the true
+    EE-ball gap within CONTACT_TOL_M) from the driver's logs."""
     from adaptive_c3.systems.franka.impedance_controller import ArmModel
+    from adaptive_c3.tools.run_ball_rolling import CONTACT_TOL_M
     ball = drv.logs["ball_true"].FindLog(context)
     arm = drv.logs["panda_state"].FindLog(context)
     b = ball.data().T
@@ -170,11 +173,14 @@ def driver_summary(drv: SimDriver, context) -> dict:
     for q, p in zip(qs[::5], b[::5, 4:7]):
         model.set_state(q[:NQ], q[NQ:])
         gaps.append(np.linalg.norm(model.tip_pose()[0] - p))
+    touch = drv.true_radius + drv.ee_radius
+    first = next((i for i, g in enumerate(gaps) if g - touch <= CONTACT_TOL_M), None)
     dctx = drv.diagram.GetSubsystemContext(drv.command, context)
     return {"sim_time_s": float(context.get_time()),
             "ball_displacement_m": float(np.linalg.norm(b[-1, 4:6] - b[0, 4:6])),
             "ball_final": b[-1, 4:7].tolist(),
             "min_ee_ball_distance_m": float(min(gaps)) if gaps else None,
+            "first_contact_s": None if first is None else float(ball.sample_times()[5 * first]),
             **drv.command.counts(dctx)}
 
 
@@ -201,9 +207,12 @@ def cmd_sim_driver(args) -> int:
     drv = build_sim_driver(s, lcm, status_period=args.status_period,
                            expire_sec=args.expire_sec, low_pass_hz=args.low_pass_hz,
                            clock=wall_clock_us)
+    from adaptive_c3.tools.hardware.realtime_priority import request_fifo
+    scheduling = request_fifo(args.rt_priority)
     sim = Simulator(drv.diagram)
     sim.set_target_realtime_rate(1.0)
     sim.Initialize()
+    start_epoch_s = time.time()
     print(f"sim-driver: publishing {STATUS_CHANNEL}, {BALL_CHANNEL}; listening on "
           f"{COMMAND_CHANNEL} at {args.lcm_url} for {duration:g} s", flush=True)
     start = time.perf_counter()
@@ -218,6 +227,9 @@ def cmd_sim_driver(args) -> int:
         raise UserError(f"stopped at t = {sim.get_context().get_time():.3f} s: {e}")
     summary = driver_summary(drv, sim.get_context())
     summary["wall_s"] = time.perf_counter() - start
+    summary["cpu_s"] = time.process_time()
+    summary["start_epoch_s"] = start_epoch_s
+    summary["scheduling"] = scheduling
     print(json.dumps(summary), flush=True)
     return 0
 

@@ -16,7 +16,10 @@ def run_split_loopback(s, duration: float, *, step: float = 1e-3, low_pass_hz: f
     from pydrake.lcm import DrakeLcm
     from pydrake.systems.analysis import Simulator
 
+    from adaptive_c3.tools.hardware.first_messages import (initialise_from_messages,
+                                                               wait_for_channels)
     from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
+    from adaptive_c3.tools.hardware.lcm_channels import BALL_CHANNEL, STATUS_CHANNEL
     from adaptive_c3.tools.hardware.planner_process import build_planner_process
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
     lcm = DrakeLcm("memq://")
@@ -24,8 +27,11 @@ def run_split_loopback(s, duration: float, *, step: float = 1e-3, low_pass_hz: f
     planner = build_planner_process(s, lcm, delay_s=delay_s, transport_s=step)
     imp = build_impedance_process(s, lcm, stale_s=stale_s)
     sims = [Simulator(d) for d in (drv.diagram, planner.diagram, imp.diagram)]
-    for sim in sims:
-        sim.Initialize()
+    sims[0].Initialize()                # publishes the first status and ball estimate
+    wait_for_channels(lcm, [STATUS_CHANNEL, BALL_CHANNEL],
+                      pump=lambda: lcm.HandleSubscriptions(0), timeout_s=0.0)
+    for sim in sims[1:]:
+        initialise_from_messages(sim)
     wall = time.perf_counter()
     for k in range(1, int(round(duration / step)) + 1):
         for sim in sims:

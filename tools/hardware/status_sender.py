@@ -30,19 +30,26 @@ class StatusSender(LeafSystem):
                                        self._calc)
 
     def _calc(self, context, output):
-        from drake import lcmt_panda_status
         x = [float(v) for v in self._state.Eval(context)]
         tau = [float(v) for v in self._tau.Eval(context)]
-        msg = lcmt_panda_status()
-        msg.utime = int(self._clock(context.get_time()))
-        msg.num_joints = NQ
-        msg.joint_position = msg.joint_position_desired = x[:NQ]
-        msg.joint_velocity = msg.joint_velocity_desired = x[NQ:]
-        msg.joint_acceleration_desired = [0.0] * NQ
-        msg.joint_torque = msg.joint_torque_desired = tau
-        msg.joint_torque_external = [0.0] * NQ
-        msg.control_command_success_rate = 1.0
-        msg.robot_mode = self._mode
-        msg.robot_utime = int(round(context.get_time() * 1e6))
-        msg.control_mode = lcmt_panda_status.CONTROL_MODE_TORQUE
-        output.set_value(msg)
+        output.set_value(status_message(int(self._clock(context.get_time())), x[:NQ], x[NQ:],
+                                        tau, self._mode,
+                                        int(round(context.get_time() * 1e6))))
+
+
+def status_message(utime: int, q, v, tau, robot_mode: int, robot_utime: int = 0):
+    """A complete torque-mode lcmt_panda_status (q rad, v rad/s, tau N m)."""
+    from drake import lcmt_panda_status
+    msg = lcmt_panda_status()
+    msg.utime = int(utime)
+    msg.num_joints = NQ
+    msg.joint_position = msg.joint_position_desired = [float(a) for a in q]
+    msg.joint_velocity = msg.joint_velocity_desired = [float(a) for a in v]
+    msg.joint_acceleration_desired = [0.0] * NQ
+    msg.joint_torque = msg.joint_torque_desired = [float(a) for a in tau]
+    msg.joint_torque_external = [0.0] * NQ
+    msg.control_command_success_rate = 1.0
+    msg.robot_mode = int(robot_mode)
+    msg.robot_utime = int(robot_utime)
+    msg.control_mode = lcmt_panda_status.CONTROL_MODE_TORQUE
+    return msg
