@@ -231,11 +231,12 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
     lin_kwargs = dict(num_edges=m.friction_edges, eps_c=m.eps_c, ball_radius=m.ball_radius,
                       ball_mass=m.ball_mass, ee_radius=m.ee_radius, ee_mass=m.ee_mass,
                       mu=m.friction)
+    # one linearizer: the three LCS systems (planning dt, loop period, learner dt) update
+    # together at the same state and share its evaluation there
     lin = ball_rolling_linearizer(dt=m.planning_dt, **lin_kwargs)
-    lin_loop = ball_rolling_linearizer(dt=1.0 / s.c3.rate_hz, **lin_kwargs)
     lcs_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start))
-    loop_sys = builder.AddSystem(AnitescuLcsSystem(lin_loop, s.c3.rate_hz,
-                                                   initial_state=x_start))
+    loop_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start,
+                                                   dt=1.0 / s.c3.rate_hz))
     num_lambda = len(lin.lambda_names())
 
     # 6. learner, on its own LCS step (r_comp is rescaled to the planning dt: both carry
@@ -243,9 +244,8 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
     dt_learn = m.learner_dt or m.planning_dt
     learn_sys = lcs_sys
     if abs(dt_learn - m.planning_dt) > 1e-12:
-        learn_sys = builder.AddSystem(AnitescuLcsSystem(
-            ball_rolling_linearizer(dt=dt_learn, **lin_kwargs), s.c3.rate_hz,
-            initial_state=x_start))
+        learn_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz,
+                                                        initial_state=x_start, dt=dt_learn))
     stride = max(1, int(round(LEARNER_SAMPLE_HZ / s.learner.rate_hz)))
     learner = builder.AddSystem(ResidualLearner(
         learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,

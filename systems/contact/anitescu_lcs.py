@@ -118,6 +118,7 @@ class AnitescuLinearizer:
         self._edge_cs[np.abs(self._edge_cs) < 1e-12] = 0.0
         self._E_t = np.kron(np.eye(self.num_contacts), np.ones((1, self.num_edges)))
         self._mu_edges = np.repeat([p["mu"] for p in self._pairs], self.num_edges)
+        self._point = (None, None)    # (key of (x, u), its dt-independent terms)
 
     # ------------------------------------------------------------------ set-up
     def _resolve_geometry(self, g, inspector) -> GeometryId:
@@ -248,6 +249,22 @@ class AnitescuLinearizer:
         """θ* at (x*, u*) as an Lcs (dt defaults to the linearizer's dt)."""
         return self.linearize_terms(x_star, u_star, dt).lcs
 
+    def _point_terms(self, x, u):
+        """The dt-independent terms at (x, u): smooth dynamics, contact geometry and the
+        kinematic maps. The last point is kept, so LCSs of several dt at the same state
+        and input (planning, loop period, learner) cost one evaluation."""
+        key = x.tobytes() + u.tobytes()
+        if self._point[0] != key:
+            f, J_f, M, M_inv = self.smooth_dynamics(x, u)
+            phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
+            N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
+            N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
+            terms = (f, J_f, M, M_inv, phi, J_n, J_t, normals, N, N_plus)
+            for a in terms:           # shared by every LCS built at this point
+                a.setflags(write=False)
+            self._point = (key, terms)
+        return self._point[1]
+
     def linearize_terms(self, x_star, u_star, dt: float | None = None) -> AnitescuTerms:
         """θ* and the intermediate terms (φ, Jacobians, J_f, M, N)."""
         x, u = self._check(x_star, u_star)
@@ -255,11 +272,7 @@ class AnitescuLinearizer:
         if not (np.isfinite(dt) and dt > 0):
             raise ValueError(f"dt must be > 0, got {dt}")
         nq, nv, nx, nu = self.nq, self.nv, self.nx, self.nu
-        f, J_f, M, M_inv = self.smooth_dynamics(x, u)
-        phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
-        N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
-        N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
-
+        f, J_f, M, M_inv, phi, J_n, J_t, normals, N, N_plus = self._point_terms(x, u)
         q_star = x[:nq]
         J_c = self._E_t.T @ J_n + self._mu_edges[:, None] * J_t
         MinvJcT = M_inv @ J_c.T

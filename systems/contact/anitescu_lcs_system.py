@@ -12,7 +12,9 @@ Output ports
 
 The LCS is held in abstract state and refreshed by a periodic unrestricted update at
 `update_rate_hz` (default 80 Hz) and once at initialisation, so "lcs" is valid from
-t = 0 and constant between updates.
+t = 0 and constant between updates. `dt` (s, default the linearizer's) is the LCS
+step: systems that share one linearizer at different dt and update at the same state
+and input share its evaluation at that point (AnitescuLinearizer keeps the last one).
 """
 from __future__ import annotations
 
@@ -27,11 +29,12 @@ class AnitescuLcsSystem(LeafSystem):
     """Wraps an AnitescuLinearizer as a Drake system (see module docstring)."""
 
     def __init__(self, linearizer: AnitescuLinearizer, update_rate_hz: float = 80.0,
-                 initial_state=None, initial_input=None):
+                 initial_state=None, initial_input=None, dt: float | None = None):
         super().__init__()
         if not (np.isfinite(update_rate_hz) and update_rate_hz > 0):
             raise ValueError(f"update_rate_hz must be > 0, got {update_rate_hz}")
         self._lin = linearizer
+        self._dt = linearizer.dt if dt is None else float(dt)
         self._names = list(linearizer.lambda_names())
         self._nx, self._nu = linearizer.nx, linearizer.nu
         self.update_period = 1.0 / float(update_rate_hz)
@@ -41,7 +44,7 @@ class AnitescuLcsSystem(LeafSystem):
         u0 = (np.zeros(self._nu) if initial_input is None
               else np.asarray(initial_input, float).reshape(-1))
         self._u_zero = np.zeros(self._nu)
-        initial_lcs = linearizer.linearize(x0, u0)
+        initial_lcs = linearizer.linearize(x0, u0, self._dt)
 
         self._state_port = self.DeclareVectorInputPort("state", self._nx)
         self._input_port = self.DeclareVectorInputPort("input", self._nu)
@@ -70,7 +73,7 @@ class AnitescuLcsSystem(LeafSystem):
         x = self._state_port.Eval(context)
         u = self._input_port.Eval(context) if self._input_port.HasValue(context) \
             else self._u_zero
-        lcs = self._lin.linearize(x, u)
+        lcs = self._lin.linearize(x, u, self._dt)
         state.get_mutable_abstract_state(self._lcs_index).set_value(lcs)
 
     def _calc_names(self, context, output):

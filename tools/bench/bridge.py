@@ -22,6 +22,7 @@ import os
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -111,6 +112,9 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
 def run_bench(quick: bool = False) -> list[dict]:
     duration = 10.0 if quick else 90.0
     r = run_three_processes(duration)
+    out = Path("runs/bridge")
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "three_processes.json").write_text(json.dumps(r, indent=1, default=float))
     per = r["command_period_ms"]
     return [
         {"name": "bridge/command_period_p99_ms", "median_ms": per["p50"], "value": per["p99"],

@@ -30,26 +30,24 @@ def add_lcm(builder, lcm):
     builder.AddSystem(LcmInterfaceSystem(lcm))
 
 
-def add_status_input(builder, lcm, s) -> StatusInput:
-    """The status twice: C++-decoded for Drake's receiver, Python-decoded for the rest."""
+def add_status_input(builder, lcm, s, sample_period: float | None = None) -> StatusInput:
+    """PANDA_STATUS decoded once (Python), and as the arm state. sample_period: take the
+    newest status every sample_period s (SampledLcmSubscriber) instead of at every
+    message - for a diagram that does not need the driver's 1 kHz."""
     from drake import lcmt_panda_status
-    from pydrake.manipulation import PandaStatusReceiver
     from pydrake.systems.lcm import LcmSubscriberSystem
-    from pydrake.systems.primitives import Multiplexer
 
-    from adaptive_c3.tools.hardware.finite_or import FiniteOr
-    status_cpp = builder.AddSystem(LcmSubscriberSystem.Make(
-        STATUS_CHANNEL, lcmt_panda_status, lcm, use_cpp_serializer=True))
-    status_py = builder.AddSystem(LcmSubscriberSystem.Make(STATUS_CHANNEL, lcmt_panda_status, lcm))
-    status_py.set_name(f"LcmSubscriberSystem({STATUS_CHANNEL}, python)")
-    receiver = builder.AddSystem(PandaStatusReceiver(NQ))
-    builder.Connect(status_cpp.get_output_port(), receiver.get_input_port())
-    mux = builder.AddSystem(Multiplexer([NQ, NQ]))
-    builder.Connect(receiver.GetOutputPort("position_measured"), mux.get_input_port(0))
-    builder.Connect(receiver.GetOutputPort("velocity_measured"), mux.get_input_port(1))
-    finite = builder.AddSystem(FiniteOr(np.r_[np.asarray(s.impedance.q_null, float), np.zeros(NQ)]))
-    builder.Connect(mux.get_output_port(), finite.get_input_port())
-    return StatusInput(status_py.get_output_port(), finite.get_output_port())
+    from adaptive_c3.tools.hardware.sampled_subscriber import SampledLcmSubscriber
+    from adaptive_c3.tools.hardware.status_arm_state import StatusArmState
+    if sample_period is None:
+        sub = builder.AddSystem(LcmSubscriberSystem.Make(STATUS_CHANNEL, lcmt_panda_status, lcm))
+    else:
+        sub = builder.AddSystem(SampledLcmSubscriber(STATUS_CHANNEL, lcmt_panda_status, lcm,
+                                                     sample_period))
+    arm = builder.AddSystem(StatusArmState(np.r_[np.asarray(s.impedance.q_null, float),
+                                                 np.zeros(NQ)]))
+    builder.Connect(sub.get_output_port(), arm.get_input_port())
+    return StatusInput(sub.get_output_port(), arm.get_output_port())
 
 
 def add_ball_input(builder, lcm, s, period: float):

@@ -60,7 +60,9 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
     from adaptive_c3.tools.hardware.plan_encoder import PlanEncoder
     builder = DiagramBuilder()
     add_lcm(builder, lcm)
-    status = add_status_input(builder, lcm, s)
+    # the planner's systems run at 80 Hz (C3, LCS) and 200 Hz (learner samples): the
+    # newest status every 2.5 ms, not a simulator step per 1 kHz status
+    status = add_status_input(builder, lcm, s, sample_period=2.5e-3)
     kin = builder.AddSystem(make_impedance_controller(s))     # for ee.state / commanded force
     builder.Connect(status.arm_state, kin.GetInputPort("panda.state"))
     ball = add_ball_input(builder, lcm, s, period=ball_period)
