@@ -266,7 +266,7 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
         feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY,
         predict_state=s.c3.predict_state,
         predict_latency_s=s.c3.predict_latency_s if s.c3.predict_latency_s >= 0 else None,
-        transport_s=transport_s))
+        transport_s=transport_s, warm_start_shift=s.c3.warm_start_shift))
 
     u_port = planner.GetOutputPort("lcs_input")
     for sys_ in {lcs_sys, loop_sys, learn_sys}:

@@ -25,6 +25,8 @@ class C3Config:
     warm_start: bool = True
     predict_state: bool = False    # plan from the state predicted at the plan's effect time
     predict_latency_s: float = -1.0  # that lead, s; < 0: measured solve time + transport
+    warm_start_shift: str = "knot"  # knot: the last plan moved one LCS step | elapsed: moved
+                                    # by the time between the plans' start states
     q_diag: List[float] = dc.field(default_factory=list)
     r_diag: List[float] = dc.field(default_factory=list)
     g_diag: List[float] = dc.field(default_factory=list)
@@ -68,6 +70,8 @@ def _validate_common(s) -> None:
          f"c3.projection must be c3plus, qp or exact, got '{c3.projection}'")
     need(c3.qp_backend in ("kkt", "osqp"), f"c3.qp_backend must be kkt or osqp, got '{c3.qp_backend}'")
     need(c3.rho_scale >= 1 and math.isfinite(c3.rho_scale), f"c3.rho_scale must be >= 1, got {c3.rho_scale}")
+    need(c3.warm_start_shift in ("knot", "elapsed"),
+         f"c3.warm_start_shift must be knot or elapsed, got '{c3.warm_start_shift}'")
     need(math.isfinite(c3.predict_latency_s) and c3.predict_latency_s < 1.0,
          f"c3.predict_latency_s must be < 1 s (< 0: measured), got {c3.predict_latency_s}")
     for key in ("q_diag", "r_diag", "g_diag", "u_diag"):

@@ -322,3 +322,14 @@ def test_missing_keys_and_bad_solve_inputs_raise():
         bad_g.solve(lcs, np.zeros(4))
     with pytest.raises(ValueError):                       # LCS sizes differ from options
         C3Solver(ballroll_c3_options()).solve(lcs, np.zeros(4))
+
+
+def test_shift_knots_moves_a_trajectory_by_fractions_of_a_knot():
+    from adaptive_c3.systems.c3.solver import shift_knots
+    traj = np.arange(5.0)[:, None] * np.array([[1.0, 10.0]])      # row i = [i, 10 i]
+    np.testing.assert_allclose(shift_knots(traj, 1.0)[:, 0], [1, 2, 3, 4, 4])
+    np.testing.assert_allclose(shift_knots(traj, 0.25)[:, 0], [0.25, 1.25, 2.25, 3.25, 4])
+    np.testing.assert_allclose(shift_knots(traj, 0.0), traj)
+    np.testing.assert_allclose(shift_knots(traj, 7.0)[:, 1], [40] * 5)
+    with pytest.raises(ValueError):
+        shift_knots(traj, -0.1)

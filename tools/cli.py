@@ -176,6 +176,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl = controller_process("planner", "estimator, Anitescu LCS, residual learner and C3: "
                             "PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN (drake.lcmt_robot_state: EE "
                             "target, velocity, feed-forward force)", "cmd_planner")
+    pl.add_argument("--nice", type=int, default=0,
+                    help="nice value (e.g. -10: ahead of ordinary work on the machine, still "
+                         "behind the SCHED_FIFO driver and impedance loop)")
     pl.add_argument("--delay-ms", type=float, default=0.0,
                     help="hold every plan back this long before sending it (an injected latency)")
 

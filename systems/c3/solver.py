@@ -242,6 +242,19 @@ def cartpole_c3_options(projection: str = "c3plus", **overrides) -> C3Options:
     return C3Options(**kw)
 
 
+def shift_knots(traj: np.ndarray, shift: float) -> np.ndarray:
+    """traj [N, ...] advanced by `shift` knots: row i is traj at i + shift, linearly
+    interpolated between knots and held at the last one."""
+    if not (np.isfinite(shift) and shift >= 0):
+        raise ValueError(f"shift must be finite and >= 0, got {shift}")
+    N = traj.shape[0]
+    pos = np.minimum(np.arange(N) + shift, N - 1)
+    lo = np.floor(pos).astype(int)
+    hi = np.minimum(lo + 1, N - 1)
+    a = (pos - lo).reshape((N,) + (1,) * (traj.ndim - 1))
+    return (1.0 - a) * traj[lo] + a * traj[hi]
+
+
 @dataclass(frozen=True)
 class C3Solution:
     """One C3 solve. Units are those of the LCS (x, lam, u)."""
@@ -377,11 +390,14 @@ class C3Solver:
 
     # --- the solve -------------------------------------------------------------
     def solve(self, lcs: Lcs | LcsSequence, x0, x_target=None,
-              warm: C3Solution | None = None) -> C3Solution:
+              warm: C3Solution | None = None, warm_shift: float = 1.0) -> C3Solution:
         """Plan from x0 towards x_target ([n] or [N+1, n]; default 0).
 
         warm: the solution to warm-start from (default: this solver's last one, if
-        options.warm_start); the previous delta is shifted one knot.
+        options.warm_start); its delta is shifted `warm_shift` knots (>= 0, fractions
+        interpolated linearly, the last knot held): 1 when each solve starts one LCS
+        step after the last, (time between the plans' start states) / dt when C3 runs
+        faster than its LCS step.
         """
         t_start = time.perf_counter()
         o = self.options
@@ -429,8 +445,7 @@ class C3Solver:
         warm = warm if warm is not None else (self.last_solution if o.warm_start else None)
         delta = np.zeros((N, nz))
         if warm is not None and warm.delta.shape == (N, nz):
-            delta[:-1] = warm.delta[1:]
-            delta[-1] = warm.delta[-1]
+            delta = shift_knots(warm.delta, warm_shift)
         else:
             delta[:, :n] = x0
         w = np.zeros((N, nz))

@@ -15,6 +15,10 @@ With `predict_state`, steps 2-3 start from the state predicted at the time the p
 takes effect (`predict_state_ahead`: constant EE and ball velocities over the lead),
 the lead being `predict_latency_s` or, if None, the median of the last solve times plus
 `transport_s` (the time the plan takes to reach the impedance loop).
+The warm start is the last plan of the same solver moved on by one LCS step
+(`warm_start_shift="knot"`) or by the time between the two plans' start states, in
+LCS steps (`"elapsed"`: at 80 Hz and a 0.1 s step, an eighth of a knot per solve; the
+wall-clock process's diagram time follows the wall clock, so this is real time there).
 
 Input ports (world frame W, SI units):
   state     (19)       estimated state, models/ball_rolling_controller_model order.
@@ -60,7 +64,7 @@ class BallRollingPlanner(LeafSystem):
                  ee_ball_rows=(0, 1, 2, 3), planning_dt: float = 0.1,
                  feedforward: bool = True, model_ee_weight: float = 0.0,
                  predict_state: bool = False, predict_latency_s: float | None = None,
-                 transport_s: float = 0.0):
+                 transport_s: float = 0.0, warm_start_shift: str = "knot"):
         super().__init__()
         self._gait = gait
         self._roll = C3Solver(roll_options)
@@ -77,6 +81,9 @@ class BallRollingPlanner(LeafSystem):
         self._predict = bool(predict_state)
         self._lead_s = predict_latency_s
         self._transport_s = float(transport_s)
+        if warm_start_shift not in ("knot", "elapsed"):
+            raise ValueError(f"warm_start_shift must be knot or elapsed, got {warm_start_shift!r}")
+        self._shift_elapsed = warm_start_shift == "elapsed"
 
         self._x_port = self.DeclareVectorInputPort("state", N_X)
         self._lcs_port = self.DeclareAbstractInputPort("lcs", AbstractValue.Make(None))
@@ -144,8 +151,10 @@ class BallRollingPlanner(LeafSystem):
             self._hold(state, x, iphase)
             return EventStatus.Succeeded()
         r = self._residual(context)
+        t_start = t                      # the time the plan's start state stands for
         if self._predict:
-            x = predict_state_ahead(x, self.lead_s())
+            t_start += self.lead_s()
+            x = predict_state_ahead(x, t_start - t)
         gap = self.gap_offset(r)
         target = self._gait.target_state(phase, x, gap)
         if phase != "roll" and self._gait.s.return_mode == "waypoint":
@@ -154,10 +163,13 @@ class BallRollingPlanner(LeafSystem):
         solver = self._roll if phase == "roll" else self._ret
         prev = context.get_abstract_state(int(self._plan)).get_value()
         warm = prev if (prev is not None and prev[0] == solver) else None
+        shift = 1.0
+        if warm and self._shift_elapsed:     # the plans' start states are this many knots apart
+            shift = max(t_start - warm[2], 0.0) / self._dt_plan
         t0 = time.perf_counter()
         try:
             sol = solver.solve(lcs.with_residual(r), x, target,
-                               warm=warm[1] if warm else None)
+                               warm=warm[1] if warm else None, warm_shift=shift)
             loop = lcs_loop.with_residual(r * (self._dt_plan / lcs_loop.dt))
             x_next, _ = loop.step(x, sol.u0)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
@@ -174,7 +186,7 @@ class BallRollingPlanner(LeafSystem):
         cmd = np.concatenate([p_des, v_des, (sol.u0 - self._ee_weight) if self._ff else np.zeros(3), sol.u0,
                               [iphase], target[7:9]])
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
-        state.get_mutable_abstract_state(int(self._plan)).set_value((solver, sol))
+        state.get_mutable_abstract_state(int(self._plan)).set_value((solver, sol, t_start))
         return EventStatus.Succeeded()
 
     def _waypoint(self, state, x, iphase, target):

@@ -39,7 +39,9 @@ def cmd_planner(args) -> int:
     from adaptive_c3.tools.user_input import UserError
     if not (0 <= args.delay_ms < 1000):
         raise UserError(f"--delay-ms must be in [0, 1000), got {args.delay_ms}")
+    from adaptive_c3.tools.hardware.realtime_priority import request_nice
     lcm = open_lcm(args.lcm_url)
+    scheduling = request_nice(args.nice)
     proc = build_planner_process(s, lcm, delay_s=args.delay_ms * 1e-3)
     start_epoch_s = []      # wall clock at diagram time 0 (to line up with the driver's)
     ctx, wall = run_realtime(proc.diagram, duration,
@@ -47,7 +49,7 @@ def cmd_planner(args) -> int:
                              wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]),
                              on_start=lambda: start_epoch_s.append(time.time()))
     out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(),
-           "start_epoch_s": start_epoch_s[0], **proc.summary(ctx)}
+           "start_epoch_s": start_epoch_s[0], "scheduling": scheduling, **proc.summary(ctx)}
     print(json.dumps(out, default=float), flush=True)
     return 0
 
