@@ -160,9 +160,11 @@ class BallRollingPlanner(LeafSystem):
         if phase != "roll" and self._gait.s.return_mode == "waypoint":
             self._waypoint(state, x, iphase, target)
             return EventStatus.Succeeded()
-        solver = self._roll if phase == "roll" else self._ret
+        which = "roll" if phase == "roll" else "return"
+        solver = self._roll if which == "roll" else self._ret
         prev = context.get_abstract_state(int(self._plan)).get_value()
-        warm = prev if (prev is not None and prev[0] == solver) else None
+        # (the held plan is deep-copied with the context: compare by name, not identity)
+        warm = prev if (prev is not None and prev[0] == which) else None
         shift = 1.0
         if warm and self._shift_elapsed:     # the plans' start states are this many knots apart
             shift = max(t_start - warm[2], 0.0) / self._dt_plan
@@ -186,7 +188,7 @@ class BallRollingPlanner(LeafSystem):
         cmd = np.concatenate([p_des, v_des, (sol.u0 - self._ee_weight) if self._ff else np.zeros(3), sol.u0,
                               [iphase], target[7:9]])
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
-        state.get_mutable_abstract_state(int(self._plan)).set_value((solver, sol, t_start))
+        state.get_mutable_abstract_state(int(self._plan)).set_value((which, sol, t_start))
         return EventStatus.Succeeded()
 
     def _waypoint(self, state, x, iphase, target):

@@ -11,6 +11,7 @@ and C3, apart from the 1 kHz loop.
 """
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass
 
 import numpy as np

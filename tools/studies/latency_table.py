@@ -8,6 +8,11 @@ at the plan's effect time (`c3.predict_state`, lead = the injected delay + 1 ms)
 rolling, camera off, the scenario's 5 mm radius error, adaptation on, the driver's rules
 with libfranka's default 100 Hz torque cutoff. Lock-step: simulated time, no wall-clock
 jitter - it isolates the latency itself. Writes a JSON table and prints it.
+
+`--wall-clock`: the same cases as three OS processes over LCM in wall-clock time
+(tools/bench/bridge.py `run_three_processes`: the driver's 30 Hz cutoff, the reference
+gains, SCHED_FIFO driver and impedance loop), one after the other; the predicted state's
+lead is then measured (median solve time + the delay + 1 ms).
 """
 from __future__ import annotations
 
@@ -37,15 +42,34 @@ def run_case(args):
             "wall_s": out["wall_s"]}
 
 
+def run_wall_clock_case(delay: float, predict: bool, duration: float) -> dict:
+    from adaptive_c3.tools.bench.bridge import SETS as BRIDGE_SETS, run_three_processes
+    sets = list(BRIDGE_SETS) + [f"c3.predict_state={'true' if predict else 'false'}"]
+    r = run_three_processes(duration, sets=sets, planner_args=["--delay-ms", str(1e3 * delay)])
+    drv = r["processes"].get("sim-driver", {})
+    return {"delay_ms": 1e3 * delay, "predicted_state": predict, "duration_s": duration,
+            "clock": "wall", "circle_turns": r["circle_turns"],
+            "ball_displacement_m": drv.get("ball_displacement_m"),
+            "commands_expired": drv.get("commands_expired"),
+            "first_contact_s": r["first_contact_s"],
+            "command_period_p99_ms": r["command_period_ms"]["p99"],
+            "plan_age_p99_ms": r["planner_latency_ms"]["p99"]}
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--duration", type=float, default=30.0)
     p.add_argument("--out", default="runs/latency_table.json")
     p.add_argument("--workers", type=int, default=2)
+    p.add_argument("--wall-clock", action="store_true",
+                   help="three OS processes in wall-clock time instead of lock-step")
     a = p.parse_args(argv)
-    jobs = [(d, pr, a.duration) for d, pr in CASES]
-    with multiprocessing.get_context("fork").Pool(a.workers) as pool:
-        rows = pool.map(run_case, jobs)
+    if a.wall_clock:
+        rows = [run_wall_clock_case(d, pr, a.duration) for d, pr in CASES]
+    else:
+        jobs = [(d, pr, a.duration) for d, pr in CASES]
+        with multiprocessing.get_context("fork").Pool(a.workers) as pool:
+            rows = pool.map(run_case, jobs)
     from pathlib import Path
     Path(a.out).parent.mkdir(parents=True, exist_ok=True)
     Path(a.out).write_text(json.dumps(rows, indent=1))
