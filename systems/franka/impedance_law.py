@@ -112,7 +112,8 @@ def task_inertia(J: np.ndarray, M: np.ndarray, reg: float = 1e-8):
     """(Lambda, M^-1 J'): task-space inertia (J M^-1 J')^-1 (slightly regularised)."""
     Minv_Jt = np.linalg.solve(M, J.T)
     JMJ = J @ Minv_Jt
-    return np.linalg.inv(JMJ + reg * np.eye(JMJ.shape[0])), Minv_Jt
+    JMJ[np.diag_indices_from(JMJ)] += reg
+    return np.linalg.inv(JMJ), Minv_Jt
 
 
 def nullspace_projector_transpose(J: np.ndarray, M: np.ndarray,
@@ -138,30 +139,30 @@ def impedance_torque(*, J, M, p, R, q, v, p_des, v_des, R_des, f_ff=None,
     M = np.asarray(M, float)
     q = np.asarray(q, float)
     v = np.asarray(v, float)
+    p, R = np.asarray(p, float), np.asarray(R, float)
+    p_des, v_des, R_des = (np.asarray(p_des, float), np.asarray(v_des, float),
+                           np.asarray(R_des, float))
+    q_null = np.asarray(q_null, float)
     f_ff = np.zeros(3) if f_ff is None else np.asarray(f_ff, float)
     cor = np.zeros(len(q)) if coriolis is None else np.asarray(coriolis, float)
-    arrays = (J, M, np.asarray(p, float), np.asarray(R, float), q, v,
-              np.asarray(p_des, float), np.asarray(v_des, float),
-              np.asarray(R_des, float), f_ff, cor, np.asarray(q_null, float))
-    if not all(np.all(np.isfinite(a)) for a in arrays):
+    flat = np.concatenate([a.ravel() for a in (J, M, p, R, q, v, p_des, v_des, R_des, f_ff,
+                                                cor, q_null)])
+    if not np.isfinite(flat).all():           # one check for all inputs (1 kHz budget)
         return np.zeros(len(q))
     g = gains
     V = J @ v                                  # [w; v_tip]
-    w, v_tip = V[:3], V[3:]
-    e_R = orientation_error(np.asarray(R_des, float), np.asarray(R, float))
-    torque = g.rotational_stiffness * e_R - g.rotational_damping * w
-    force = (g.translational_stiffness * (np.asarray(p_des, float) - np.asarray(p, float))
-             + g.translational_damping * (np.asarray(v_des, float) - v_tip))
+    e_R = orientation_error(R_des, R)
+    wrench = np.empty(6)
+    wrench[:3] = g.rotational_stiffness * e_R - g.rotational_damping * V[:3]
+    wrench[3:] = (g.translational_stiffness * (p_des - p)
+                  + g.translational_damping * (v_des - V[3:]))
     Lam, Minv_Jt = task_inertia(J, M)
-    wrench = np.concatenate([torque, force])
     if g.operational_space:
         wrench = Lam @ wrench
     wrench[3:] += f_ff
-    tau_task = J.T @ wrench
-    tau_posture = (g.nullspace_stiffness * (np.asarray(q_null, float) - q)
-                   - g.nullspace_damping * v)
-    Nt = np.eye(len(q)) - J.T @ Lam @ Minv_Jt.T
-    tau = tau_task + Nt @ tau_posture + cor
+    tau_posture = g.nullspace_stiffness * (q_null - q) - g.nullspace_damping * v
+    # N' tau_posture = tau_posture - J' Lambda (J M^-1) tau_posture, without forming N'
+    tau = (J.T @ (wrench - Lam @ (Minv_Jt.T @ tau_posture))) + tau_posture + cor
     if not np.all(np.isfinite(tau)):
         return np.zeros(len(q))
     lim = np.asarray(g.torque_limits, float)
