@@ -359,6 +359,8 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     _log(builder, ctrl.r_comp, "r_comp", logs)
     _log(builder, learner.GetOutputPort("loss"), "loss", logs)
     _log(builder, robot.GetOutputPort("ee.commanded_force"), "ee_force", logs)
+    if s.camera.enabled:
+        _log(builder, ball_sensor.GetOutputPort("ball.detection_ok"), "detection_ok", logs)
     if meshcat is not None:
         from pydrake.geometry import MeshcatVisualizer
         MeshcatVisualizer.AddToBuilder(builder, scene_graph, meshcat)

@@ -50,6 +50,10 @@ def cmd_run(args) -> int:
                       ("scenario", "stabilised", "laps", "residual_final", "real_time_factor")},
                      default=float))
     print(f"results in {out}: summary.json, log.npz, " + ", ".join(summary.get("plots", [])))
+    if "wall_s" in summary and "sim_duration_s" in summary:
+        wall = float(summary["wall_s"])
+        print(f"wall time {int(wall // 60)}m{wall % 60:04.1f}s for {summary['sim_duration_s']:g} s "
+              f"simulated: real-time factor {summary['sim_duration_s'] / wall:.2f}")
     return 0
 
 

@@ -13,7 +13,7 @@ import numpy as np
 from pydrake.systems.analysis import Simulator
 
 from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram, controller_prior
-from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
+from adaptive_c3.models.ball_rolling_controller_model import BALL_POS, INPUT_NAMES, STATE_NAMES
 from adaptive_c3.models.ball_rolling_scene import TABLE_CENTER_XY, TABLE_SIZE, TABLE_TOP_Z
 from adaptive_c3.systems.rolling.gait import PHASES
 from adaptive_c3.tools.progress import Progress
@@ -67,6 +67,21 @@ def circle_progress(xy, center, radius: float) -> float:
     angle = np.unwrap(np.arctan2(xy[:, 1] - c[1], xy[:, 0] - c[0]))
     on_band = np.abs(np.linalg.norm(xy - c, axis=1) - radius) <= BAND * radius
     return float(np.sum(np.diff(angle) * (on_band[1:] & on_band[:-1])) / (2 * np.pi))
+
+
+def estimate_errors(logs) -> dict:
+    """The controller's ball estimate against the truth, over the logged samples:
+    horizontal (xy) error mean / p95 / max in mm and, with the camera, the fraction of
+    samples whose latest frame gave no accepted detection (the estimate held)."""
+    _, est = logs["lcs_state"]
+    _, ball = logs["ball_true"]
+    n = min(len(est), len(ball))
+    err = 1e3 * np.linalg.norm(est[:n, BALL_POS][:, :2] - ball[:n, 4:6], axis=1)
+    out = {"error_mean_mm": float(np.mean(err)), "error_p95_mm": float(np.percentile(err, 95)),
+           "error_max_mm": float(np.max(err))}
+    if "detection_ok" in logs:
+        out["dropout_fraction"] = float(np.mean(logs["detection_ok"][1][:, 0] < 0.5))
+    return out
 
 
 def rolling_metrics(logs, scenario, true_radius: float) -> dict:
@@ -135,6 +150,7 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         "true_radius_m": handles.true_radius,
         "adaptation": bool(scenario.learner.enabled),
         **rolling_metrics(logs, scenario, handles.true_radius),
+        "ball_estimate": estimate_errors(logs),
         "residual_final": r[-1].tolist(),
         "residual_names": list(handles.lambda_names),
         "ee_ball_gap_offset_m": float(np.mean(r[-1, :half]) * dt),
