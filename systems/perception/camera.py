@@ -13,9 +13,10 @@ circle of radius 0.1 m about (0.55, 0)), looking down at it at 55 degrees from t
 -y side. Straight down (elevation 90) is available but a poor default: there the arm's
 wrist and forearm sit between the camera and the ball whenever the EE is near it. From
 the side at 55 degrees the links above the EE project well behind the ball; only the
-thin rod/tip can hide it. 320 x 240 pixels, vertical field of view 0.45 rad: about
-0.54 m (along x) x 0.5 m (along y) of table in view, ~1.7 mm per pixel at the target,
-the ball (radius 0.0315 m) about 18 pixels in radius.
+thin rod/tip can hide it. Vertical field of view 0.45 rad: about 0.54 m (along x) x
+0.5 m (along y) of table in view; at the scenarios' 160 x 120 pixels ~3.4 mm per pixel
+at the target and the ball (radius 0.0315 m) about 9 pixels in radius (at this
+function's default 320 x 240: ~1.7 mm, 18 pixels).
 """
 from __future__ import annotations
 
