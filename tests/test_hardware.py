@@ -79,6 +79,11 @@ def test_ball_estimate_layout():
     (["sim-driver", "ball_rolling", "--lcm-url", "nourl"], "bad --lcm-url"),
     (["sim-driver", "ball_rolling", "--lcm-url", "memq://", "--set", "robot=point_ee"],
      "robot: panda"),
+    # no robot on the bus: the controllers give up waiting for its first messages
+    (["impedance", "ball_rolling", "--lcm-url", "memq://", "--wait-s", "0.2"],
+     "no message on PANDA_STATUS"),
+    (["planner", "ball_rolling", "--lcm-url", "memq://", "--wait-s", "0.2"],
+     "no message on BALL_ESTIMATE, PANDA_STATUS"),
 ])
 def test_bad_input_is_one_line_exit_2(argv, needle, capsys):
     assert cli.main(argv) == 2

@@ -166,6 +166,8 @@ def build_parser() -> argparse.ArgumentParser:
         cp.add_argument("scenario", help="ball_rolling scenario YAML (a path or a shipped name)")
         cp.add_argument("--lcm-url", required=True, help="LCM URL, e.g. udpm://239.255.76.67:7667?ttl=0")
         cp.add_argument("--duration", type=float, default=None, help="stop after S seconds")
+        cp.add_argument("--wait-s", type=float, default=10.0,
+                        help="give up (exit 2) if the robot's first messages take longer")
         cp.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
         cp.set_defaults(func=_delegate("adaptive_c3.tools.hardware.process_commands", func))
         return cp

@@ -21,6 +21,7 @@ import json
 import os
 import subprocess
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -58,6 +59,8 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
         cmd_t.append(time.monotonic())
         cmd_age.append(time.time() - 1e-6 * lcmt_panda_command.decode(d).utime)
     lcm.Subscribe("PANDA_COMMAND", on_command)
+    status_t = []
+    lcm.Subscribe("PANDA_STATUS", lambda d: status_t.append(time.monotonic()))
     lcm.Subscribe(PLAN_CHANNEL, lambda d: plan_age.append(
         time.time() - 1e-6 * lcmt_robot_state.decode(d).utime))
 
@@ -69,9 +72,27 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     from adaptive_c3.tools.hardware.realtime_priority import request_fifo
     extra = {"planner": [f"--nice={planner_nice}", *planner_args]}
     listener_scheduling = request_fifo(90)
-    procs = {name: subprocess.Popen(exe + [name, *args, *extra.get(name, [])],
-                                    stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-             for name in ("sim-driver", "planner", "impedance")}
+    procs, lines = {}, {}
+
+    def start(name):
+        procs[name] = subprocess.Popen(exe + [name, *args, *extra.get(name, [])],
+                                       stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                       text=True)
+        lines[name] = []
+        reader = threading.Thread(target=lambda: lines[name].extend(procs[name].stdout),
+                                  daemon=True)
+        reader.start()
+        return reader
+    # The controllers start first and wait, built, for the robot's first messages (as
+    # they would beside a running robot, but without three processes importing and
+    # building at once on two cores: that start-up alone made 50-100 ms gaps)
+    readers = [start("planner"), start("impedance")]
+    ready_by = time.monotonic() + 120
+    while time.monotonic() < ready_by and not all(
+            any("waiting for" in ln for ln in lines[n]) or procs[n].poll() is not None
+            for n in ("planner", "impedance")):
+        time.sleep(0.05)
+    readers.append(start("sim-driver"))
     try:
         deadline = time.monotonic() + duration + 60
         while time.monotonic() < deadline and any(p.poll() is None for p in procs.values()):
@@ -80,12 +101,17 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
         for p in procs.values():
             if p.poll() is None:
                 p.terminate()
-    outputs = {n: p.communicate()[0] for n, p in procs.items()}
+    for p in procs.values():
+        p.wait()
+    for r in readers:
+        r.join(timeout=5)
+    outputs = {n: "".join(ln) for n, ln in lines.items()}
     summaries = {}
     for n, text in outputs.items():
         lines = [ln for ln in text.strip().splitlines() if ln.startswith("{")]
         summaries[n] = json.loads(lines[-1]) if lines else {"error": text.strip()[-500:]}
     periods = np.diff(cmd_t) * 1e3 if len(cmd_t) > 1 else np.array([np.nan])
+    status_periods = np.diff(status_t) * 1e3 if len(status_t) > 1 else np.array([np.nan])
     age = np.asarray(plan_age) * 1e3 if plan_age else np.array([np.nan])
     status_to_command = np.asarray(cmd_age) * 1e3 if cmd_age else np.array([np.nan])
     drv = summaries.get("sim-driver", {})
@@ -105,6 +131,10 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
                                        p99=float(np.percentile(periods, 99)),
                                        max=float(np.max(periods))),
                 expired_fraction=(drv.get("commands_expired", 0) / received) if received else 1.0,
+                status_period_ms=dict(p50=float(np.median(status_periods)),
+                                      p99=float(np.percentile(status_periods, 99)),
+                                      max=float(np.max(status_periods))),
+                statuses=len(status_t),
                 status_to_command_ms=dict(p50=float(np.median(status_to_command)),
                                           p99=float(np.percentile(status_to_command, 99))),
                 plan_rate_hz=len(plan_age) / duration,

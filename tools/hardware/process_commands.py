@@ -22,7 +22,7 @@ def cmd_impedance(args) -> int:
     ctx, wall, driven = run_status_driven(
         proc.diagram, lcm, STATUS_CHANNEL, duration,
         f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}",
-        tick_s=args.period, wait_for=(lcm, [STATUS_CHANNEL]))
+        tick_s=args.period, wait_for=(lcm, [STATUS_CHANNEL]), wait_s=args.wait_s)
     out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(), "status_ticks": driven,
            "scheduling": scheduling,
            "watchdog": proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx)),
@@ -46,7 +46,7 @@ def cmd_planner(args) -> int:
     start_epoch_s = []      # wall clock at diagram time 0 (to line up with the driver's)
     ctx, wall = run_realtime(proc.diagram, duration,
                              f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}",
-                             wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]),
+                             wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]), wait_s=args.wait_s,
                              on_start=lambda: start_epoch_s.append(time.time()))
     out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(),
            "start_epoch_s": start_epoch_s[0], "scheduling": scheduling, **proc.summary(ctx)}

@@ -29,11 +29,13 @@ def load_hardware_scenario(args):
     return s, text, duration
 
 
-def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_start=None):
+def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_start=None,
+                 wait_s: float = 10.0):
     """Advance in real time until `duration` (None: Ctrl-C); returns (context, wall s).
     wait_for = (lcm, channels): initialise only once each channel has delivered a
-    message, with those messages in the context (first_messages.py). on_start(): called
-    right after initialisation (diagram time 0)."""
+    message (within wait_s, else a one-line FirstMessagesTimeout), with those messages in
+    the context (first_messages.py). on_start(): called right after initialisation
+    (diagram time 0)."""
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
@@ -43,7 +45,7 @@ def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_
         sim.Initialize()
     else:
         print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
-        start_from_first_messages(sim, *wait_for)
+        start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
     if on_start:
         on_start()
     print(label + (f" for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
@@ -62,7 +64,7 @@ def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_
 
 def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
                       tick_s: float = 1e-3, wait_for=None, clock=time.monotonic,
-                      handle=None):
+                      handle=None, wait_s: float = 10.0):
     """Advance `diagram` one tick (tick_s of diagram time) per new message on `channel`,
     or per tick_s of wall clock without one; returns (context, wall s, ticks driven by
     a message).
@@ -84,7 +86,7 @@ def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
         sim.Initialize()
     else:
         print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
-        start_from_first_messages(sim, *wait_for)
+        start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
     fresh = [0]
 
     def on_message(_data):
