@@ -74,6 +74,7 @@ class SimDriver:
     true_radius: float      # m, the true ball
     ball_start: np.ndarray
     ee_radius: float        # m, the EE tip sphere
+    target: tuple = ((0.55, 0.0), 0.1)   # the task's circle: centre (m, W), radius (m)
 
 
 def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float = 0.1,
@@ -156,14 +157,16 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
         logs[name] = sink
     diagram = builder.Build()
     diagram.set_name(f"sim_driver[{s.name}]")
-    return SimDriver(diagram, plant, cmd, logs, R_true, np.r_[start_xy, R_true], m.ee_radius)
+    return SimDriver(diagram, plant, cmd, logs, R_true, np.r_[start_xy, R_true], m.ee_radius,
+                     (tuple(s.target.center), s.target.radius))
 
 
 def driver_summary(drv: SimDriver, context) -> dict:
-    """Ball displacement, EE-ball approach and first contact (driver time, s: the true
-    EE-ball gap within CONTACT_TOL_M) from the driver's logs."""
+    """Ball displacement, EE-ball approach, first contact (driver time, s: the true
+    EE-ball gap within CONTACT_TOL_M) and turns about the task's circle, from the
+    driver's logs (the truth, not an estimate)."""
     from adaptive_c3.systems.franka.impedance_controller import ArmModel
-    from adaptive_c3.tools.run_ball_rolling import CONTACT_TOL_M
+    from adaptive_c3.tools.run_ball_rolling import CONTACT_TOL_M, circle_progress
     ball = drv.logs["ball_true"].FindLog(context)
     arm = drv.logs["panda_state"].FindLog(context)
     b = ball.data().T
@@ -181,6 +184,7 @@ def driver_summary(drv: SimDriver, context) -> dict:
             "ball_final": b[-1, 4:7].tolist(),
             "min_ee_ball_distance_m": float(min(gaps)) if gaps else None,
             "first_contact_s": None if first is None else float(ball.sample_times()[5 * first]),
+            "circle_turns": max(circle_progress(b[:, 4:6], *drv.target), 0.0),
             **drv.command.counts(dctx)}
 
 

@@ -6,7 +6,7 @@ in lock-step over memq://, every plan held back by 0, 25 or 50 ms of simulated t
 (`planner --delay-ms`), C3 planning from the measured state or from the state predicted
 at the plan's effect time (`c3.predict_state`, lead = the injected delay + 1 ms). Ball
 rolling, camera off, the scenario's 5 mm radius error, adaptation on, the driver's rules
-with libfranka's default 100 Hz torque cutoff. Lock-step: simulated time, no wall-clock
+with the driver's 30 Hz torque filter. Lock-step: simulated time, no wall-clock
 jitter - it isolates the latency itself. Writes a JSON table and prints it.
 
 `--wall-clock`: the same cases as three OS processes over LCM in wall-clock time
@@ -32,7 +32,7 @@ def run_case(args):
     sets = SETS + [f"c3.predict_state={'true' if predict else 'false'}",
                    f"c3.predict_latency_s={delay + 0.001 if predict else -1}"]
     s, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml", sets)
-    out = run_split_loopback(s, duration, low_pass_hz=100.0, delay_s=delay)
+    out = run_split_loopback(s, duration, low_pass_hz=30.0, delay_s=delay)
     drv = out["_"]["driver"]
     ball = drv.logs["ball_true"].FindLog(out["_"]["sims"][0].get_context()).data().T
     return {"delay_ms": 1e3 * delay, "predicted_state": predict, "duration_s": duration,
