@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 import subprocess
 import sys
 import threading
@@ -38,7 +39,7 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     SCHED_FIFO driver and impedance loop); planner_args: extra planner flags (e.g.
     --delay-ms). The listener itself runs at SCHED_FIFO 90 when it may, so that its
     timestamps are not the jitter it measures."""
-    from drake import lcmt_panda_command, lcmt_robot_state
+    from drake import lcmt_robot_state
     from pydrake.lcm import DrakeLcm
 
     from adaptive_c3.scenarios.schema import load_scenario
@@ -55,23 +56,29 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     lcm = DrakeLcm(url)
     cmd_t, cmd_age, plan_age, ball = [], [], [], []
 
+    def utime(data) -> int:
+        # an LCM message is an 8-byte fingerprint, then its fields; all three types here
+        # start with int64 utime. Reading just that keeps the listener light (it runs
+        # at SCHED_FIFO 90 and must not be the jitter it measures)
+        return struct.unpack_from(">q", data, 8)[0]
+
     def on_command(d):
         cmd_t.append(time.monotonic())
-        cmd_age.append(time.time() - 1e-6 * lcmt_panda_command.decode(d).utime)
+        cmd_age.append(time.time() - 1e-6 * utime(d))
     lcm.Subscribe("PANDA_COMMAND", on_command)
     status_t = []
     lcm.Subscribe("PANDA_STATUS", lambda d: status_t.append(time.monotonic()))
-    lcm.Subscribe(PLAN_CHANNEL, lambda d: plan_age.append(
-        time.time() - 1e-6 * lcmt_robot_state.decode(d).utime))
+    lcm.Subscribe(PLAN_CHANNEL, lambda d: plan_age.append(time.time() - 1e-6 * utime(d)))
 
     def on_ball(d):
         b = decode_ball_estimate(lcmt_robot_state.decode(d))
         if np.all(np.isfinite(b)):
             ball.append(b[:2])
     lcm.Subscribe("BALL_ESTIMATE", on_ball)
-    from adaptive_c3.tools.hardware.realtime_priority import request_fifo
+    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap, request_fifo
     extra = {"planner": [f"--nice={planner_nice}", *planner_args]}
     listener_scheduling = request_fifo(90)
+    freeze_heap()
     procs, lines = {}, {}
 
     def start(name):

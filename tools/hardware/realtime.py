@@ -39,6 +39,7 @@ def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
+    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
     sim = Simulator(diagram)
     sim.set_target_realtime_rate(1.0)
     if wait_for is None:
@@ -46,6 +47,7 @@ def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_
     else:
         print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
         start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
+    freeze_heap()
     if on_start:
         on_start()
     print(label + (f" for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
@@ -81,12 +83,14 @@ def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
+    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
     sim = Simulator(diagram)
     if wait_for is None:
         sim.Initialize()
     else:
         print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
         start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
+    freeze_heap()
     fresh = [0]
 
     def on_message(_data):
