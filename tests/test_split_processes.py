@@ -208,9 +208,12 @@ def test_status_driven_loop_ticks_per_status_and_zeroes_on_silence():
         if clock["calls"] <= 200:
             lcm.Publish("PANDA_STATUS", status(NOW + 1000 * clock["calls"]).encode())
         lcm.HandleSubscriptions(0)
-    ctx, _, driven = run_status_driven(proc.diagram, lcm, "PANDA_STATUS", 0.4, "test",
+    ctx, _, driven, tick_ms = run_status_driven(proc.diagram, lcm, "PANDA_STATUS", 0.4, "test",
                                        clock=lambda: clock["t"], handle=handle)
     assert driven == 200
+    # the fake clock moves 1 ms per call: a tick per status, an idle tick at the first
+    # reading >= 1 ms after the last (float rounding can make that the second)
+    assert tick_ms["p50"] == pytest.approx(1.0) and tick_ms["max"] <= 2.0 + 1e-9
     assert commands and all(c.utime <= NOW + 200_000 for c in commands)
     report = proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx))
     assert report["mode"] == "stale" and report["counts"]["stale"] > 100

@@ -19,11 +19,11 @@ def cmd_impedance(args) -> int:
     scheduling = request_fifo(args.rt_priority)
     proc = build_impedance_process(s, lcm, command_period=args.period,
                                    stale_s=args.stale_ms * 1e-3)
-    ctx, wall, driven = run_status_driven(
+    ctx, wall, driven, tick_ms = run_status_driven(
         proc.diagram, lcm, STATUS_CHANNEL, duration,
         f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}",
         tick_s=args.period, wait_for=(lcm, [STATUS_CHANNEL]), wait_s=args.wait_s)
-    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(), "status_ticks": driven,
+    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(), "status_ticks": driven, "tick_period_ms": tick_ms,
            "scheduling": scheduling,
            "watchdog": proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx)),
            **proc.plan.counts(proc.plan.GetMyContextFromRoot(ctx))}

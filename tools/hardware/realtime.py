@@ -5,6 +5,8 @@ from __future__ import annotations
 import math
 import time
 
+import numpy as np
+
 
 def load_hardware_scenario(args):
     """(scenario, YAML text, duration or None) for the hardware commands, flags checked."""
@@ -69,7 +71,7 @@ def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
                       handle=None, wait_s: float = 10.0):
     """Advance `diagram` one tick (tick_s of diagram time) per new message on `channel`,
     or per tick_s of wall clock without one; returns (context, wall s, ticks driven by
-    a message).
+    a message, tick period stats in ms: p50, p99, max, measured by the loop itself).
 
     The 1 kHz loop of a real Franka controller runs once per robot status (libfranka's
     callback; dairlib's LcmDrivenLoop): each status is answered at once from its own
@@ -101,6 +103,7 @@ def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
     handle = handle or (lambda: lcm.HandleSubscriptions(1))
     start = last = clock()
     k = driven = 0
+    ticks = np.empty(int(duration / tick_s * 1.5) + 10 if duration else 1_000_000)
     try:
         while duration is None or last - start < duration:
             handle()
@@ -109,7 +112,12 @@ def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
                 continue
             driven += fresh[0] > 0
             fresh[0], last, k = 0, now, k + 1
+            if k <= ticks.size:
+                ticks[k - 1] = now
             sim.AdvanceTo(k * tick_s)
     except KeyboardInterrupt:
         pass
-    return sim.get_context(), clock() - start, driven
+    periods = 1e3 * np.diff(ticks[:min(k, ticks.size)])
+    stats = ({"p50": float(np.median(periods)), "p99": float(np.percentile(periods, 99)),
+              "max": float(periods.max())} if periods.size else {})
+    return sim.get_context(), clock() - start, driven, stats
