@@ -146,6 +146,7 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
                                           p99=float(np.percentile(status_to_command, 99))),
                 plan_rate_hz=len(plan_age) / duration,
                 planner_latency_ms=dict(p50=float(np.median(age)), p99=float(np.percentile(age, 99))),
+                impedance_tick_ms=summaries.get("impedance", {}).get("tick_period_ms"),
                 c3_solve_ms=plan.get("c3_solve_ms"),
                 learner_rate_hz=plan.get("learner_rate_hz"),
                 first_contact_s=first, pushes_before_contact=pushes,
@@ -162,7 +163,8 @@ def run_bench(quick: bool = False) -> list[dict]:
     per = r["command_period_ms"]
     return [
         {"name": "bridge/command_period_p99_ms", "median_ms": per["p50"], "value": per["p99"],
-         "max_ms": per["max"], "commands": r["commands"], "duration_s": duration},
+         "max_ms": per["max"], "commands": r["commands"], "duration_s": duration,
+         "impedance_tick_ms": r["impedance_tick_ms"], "status_period_ms": r["status_period_ms"]},
         {"name": "bridge/expired_fraction", "median_ms": per["p50"],
          "value": r["expired_fraction"]},
         {"name": "bridge/circles_90s", "median_ms": per["p50"],
