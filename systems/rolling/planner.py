@@ -202,6 +202,12 @@ class BallRollingPlanner(LeafSystem):
         held = context.get_abstract_state(int(self._plan)).get_value()
         return None if held is None else held[1]
 
+    def fallback_counts(self) -> dict:
+        """Fall-back totals of both C3 solvers (systems/c3/solver.py FALLBACKS) and the
+        ticks that held the EE (`holds`)."""
+        out = {k: self._roll.fallbacks[k] + self._ret.fallbacks[k] for k in self._roll.fallbacks}
+        return {**out, "holds": self.failures}
+
     def solve_time_stats(self) -> dict:
         t = np.asarray(self.solve_times, float)
         if t.size == 0:
