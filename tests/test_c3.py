@@ -244,12 +244,52 @@ def test_target_shifts_the_plan():
     assert np.abs(sol.u0).max() < np.abs(C3Solver(opts).solve(lcs, target).u0).max()
 
 
-def test_ballroll_size_solver_runs_all_projections():
+def _check_ballroll_plan(sol, lcs, x0, proj, n=19, m=8, k=3):
+    """The plan starts at x0 and follows the LCS dynamics; the last projected copy delta
+    lies in the set the projection promises: exact - the complementarity set; C3+ - lam
+    and its eta copy complementary; QP - lam >= 0, eta >= 0 (product only approximately
+    0, measured 4.2e-3 on this problem)."""
+    np.testing.assert_array_equal(sol.x_plan[0], x0)
+    np.testing.assert_array_equal(sol.u0, sol.u_plan[0])
+    x, u, lam = sol.x_plan, sol.u_plan, sol.lam_plan
+    pred = x[:-1] @ lcs.A.T + u @ lcs.B.T + lam @ lcs.D.T + lcs.d
+    np.testing.assert_allclose(x[1:], pred, atol=1e-10)
+    d_lam, d_x, d_u = sol.delta[:, n:n + m], sol.delta[:, :n], sol.delta[:, n + m:n + m + k]
+    eta = d_x @ lcs.E.T + d_lam @ lcs.F.T + d_u @ lcs.H.T + lcs.c
+    assert d_lam.min() >= -1e-9
+    if proj == "c3plus":
+        eta_copy = sol.delta[:, n + m + k:]
+        assert eta_copy.min() >= 0.0 and np.abs(d_lam * eta_copy).max() == 0.0
+    else:
+        assert eta.min() >= -1e-9
+        assert np.abs(d_lam * eta).max() <= (1e-9 if proj == "exact" else 1e-2)
+
+
+@pytest.mark.parametrize("proj", ["c3plus", "qp", "exact"])
+def test_ballroll_size_solver_plans_are_consistent(proj):
+    """Ball-rolling-sized LCS (n 19, m 8, k 3), every projection: see _check_ballroll_plan."""
     lcs = random_ballroll_lcs(0)
     x0 = 0.05 * np.random.default_rng(1).normal(size=19)
-    for proj in ("c3plus", "qp"):
-        sol = C3Solver(ballroll_c3_options(proj)).solve(lcs, x0)
-        assert sol.u0.shape == (3,) and np.all(np.isfinite(sol.x_plan))
+    sol = C3Solver(ballroll_c3_options(proj)).solve(lcs, x0)
+    assert sol.u0.shape == (3,)
+    _check_ballroll_plan(sol, lcs, x0, proj)
+    assert sum(sol.info["fallbacks"].values()) == 0
+
+
+@pytest.mark.parametrize("proj", ["c3plus", "exact"])
+def test_ballroll_plan_check_catches_broken_plans(proj):
+    """The check fails on an unprojected delta (the QP iterate z) and on a plan whose
+    states do not follow the dynamics."""
+    import dataclasses
+    lcs = random_ballroll_lcs(0)
+    x0 = 0.05 * np.random.default_rng(1).normal(size=19)
+    sol = C3Solver(ballroll_c3_options(proj)).solve(lcs, x0)
+    with pytest.raises(AssertionError):
+        _check_ballroll_plan(dataclasses.replace(sol, delta=sol.z), lcs, x0, proj)
+    x_bad = sol.x_plan.copy()
+    x_bad[2, 0] += 1e-6
+    with pytest.raises(AssertionError):
+        _check_ballroll_plan(dataclasses.replace(sol, x_plan=x_bad), lcs, x0, proj)
 
 
 # --- options -----------------------------------------------------------------------
