@@ -250,7 +250,8 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
     learner = builder.AddSystem(ResidualLearner(
         learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,
         enabled=s.learner.enabled, transition_dt=dt_learn, transition_stride=stride,
-        input_lag=1, tied_groups=_pair_groups(num_lambda),
+        input_lag=1,
+        tied_groups=_pair_groups(num_lambda) if s.learner.tie_residual == "pairs" else (),
         input_from_motion=(ee_input_from_motion(m.ee_mass, GRAVITY)
                            if m.learner_input == "motion" else None)))
     to_plan = builder.AddSystem(Gain(dt_learn / m.planning_dt, num_lambda))
@@ -266,7 +267,7 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
         feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY,
         predict_state=s.c3.predict_state,
         predict_latency_s=s.c3.predict_latency_s if s.c3.predict_latency_s >= 0 else None,
-        transport_s=transport_s))
+        transport_s=transport_s, residual_in_lcs=s.learner.residual_in_lcs))
 
     u_port = planner.GetOutputPort("lcs_input")
     for sys_ in {lcs_sys, loop_sys, learn_sys}:

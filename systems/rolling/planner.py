@@ -21,6 +21,8 @@ Input ports (world frame W, SI units):
   lcs       abstract   Lcs θ* without residual (planning dt); the planner adds r_comp.
   lcs_loop  abstract   Lcs without residual, dt = loop period.
   r_comp    (m)        the learned residual (m/s at the planning dt); optional (0).
+                       C3's LCSs get it unless residual_in_lcs is False; the gait's
+                       heights and floor use its EE-ball gap as RollingGait decides.
 Output ports:
   ee.desired_state     (6)  desired EE tip position (m) and velocity (m/s) in W.
   ee.feedforward_force (3)  the plan's first EE force u0 minus the model EE's weight
@@ -60,7 +62,7 @@ class BallRollingPlanner(LeafSystem):
                  ee_ball_rows=(0, 1, 2, 3), planning_dt: float = 0.1,
                  feedforward: bool = True, model_ee_weight: float = 0.0,
                  predict_state: bool = False, predict_latency_s: float | None = None,
-                 transport_s: float = 0.0):
+                 transport_s: float = 0.0, residual_in_lcs: bool = True):
         super().__init__()
         self._gait = gait
         self._roll = C3Solver(roll_options)
@@ -77,6 +79,7 @@ class BallRollingPlanner(LeafSystem):
         self._predict = bool(predict_state)
         self._lead_s = predict_latency_s
         self._transport_s = float(transport_s)
+        self._r_in_lcs = bool(residual_in_lcs)
 
         self._x_port = self.DeclareVectorInputPort("state", N_X)
         self._lcs_port = self.DeclareAbstractInputPort("lcs", AbstractValue.Make(None))
@@ -146,8 +149,10 @@ class BallRollingPlanner(LeafSystem):
         r = self._residual(context)
         if self._predict:
             x = predict_state_ahead(x, self.lead_s())
-        gap = self.gap_offset(r)
+        gap = self._gait.gait_gap(self.gap_offset(r))
         target = self._gait.target_state(phase, x, gap)
+        if not self._r_in_lcs:
+            r = np.zeros_like(r)
         if phase != "roll" and self._gait.s.return_mode == "waypoint":
             self._waypoint(state, x, iphase, target)
             return EventStatus.Succeeded()
@@ -168,7 +173,7 @@ class BallRollingPlanner(LeafSystem):
             return EventStatus.Succeeded()
         p_des, v_des = clamp_ee_command(x[EE_POS], x_next[EE_POS], x_next[EE_VEL],
                                         self.period_s, self._gait.s.max_ee_speed)
-        floor = self._gait.touch_height(gap) + self._gait.s.min_height
+        floor = self._gait.floor_height(gap)
         if p_des[2] < floor:
             p_des[2], v_des[2] = floor, max(v_des[2], 0.0)
         cmd = np.concatenate([p_des, v_des, (sol.u0 - self._ee_weight) if self._ff else np.zeros(3), sol.u0,

@@ -1,0 +1,56 @@
+"""Paper fidelity of the ball-rolling adaptation (issue 20): where the learned residual
+is used (C3's LCS, the gait's heights, the height floor) and how r_comp is tied."""
+import numpy as np
+import pytest
+
+from adaptive_c3.models.ball_rolling_controller_model import default_state
+from adaptive_c3.scenarios.common import ScenarioError
+from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+from adaptive_c3.systems.rolling.gait import CirclePath, GaitSettings, RollingGait
+
+SCENARIO = SCENARIO_DIR / "ball_rolling.yaml"
+
+
+def _gait(**kw):
+    return RollingGait(GaitSettings(**kw), CirclePath(), ball_radius=0.0315,
+                       ee_radius=0.0195)
+
+
+def test_gap_floor_moves_with_the_learned_gap_table_floor_does_not():
+    g = _gait(min_height=-0.005)
+    assert g.floor_height(0.0) == pytest.approx(2 * 0.0315 + 0.0195 - 0.005)
+    assert g.floor_height(0.0) - g.floor_height(0.01) == pytest.approx(0.01)
+    t = _gait(floor="table", table_clearance=0.004)
+    assert t.floor_height(0.0) == t.floor_height(0.01) == pytest.approx(0.0195 + 0.004)
+
+
+def test_gait_without_the_learned_gap_keeps_its_heights():
+    x = default_state((0.65, 0.0))
+    fixed, moving = _gait(use_learned_gap=False), _gait()
+    assert fixed.gait_gap(0.01) == 0.0 and moving.gait_gap(0.01) == 0.01
+    for phase in ("roll", "lift", "side", "place"):
+        z0 = fixed.ee_target(phase, x, fixed.gait_gap(0.0))[2]
+        assert fixed.ee_target(phase, x, fixed.gait_gap(0.01))[2] == z0
+        assert moving.ee_target(phase, x, moving.gait_gap(0.01))[2] == pytest.approx(z0 - 0.01)
+
+
+@pytest.mark.parametrize("override", ["gait.floor=ceiling", "gait.table_clearance=-0.01",
+                                      "learner.tie_residual=all"])
+def test_bad_fidelity_options_are_refused(override):
+    with pytest.raises(ScenarioError):
+        load_scenario(SCENARIO, [override])
+
+
+@pytest.mark.parametrize("tie, groups", [("pairs", [[0, 1, 2, 3], [4, 5, 6, 7]]),
+                                         ("none", [])])
+def test_tie_option_reaches_the_learner(tie, groups):
+    from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
+    s, _ = load_scenario(SCENARIO, ["robot=point_ee", "camera.enabled=false",
+                                    f"learner.tie_residual={tie}"])
+    assert build_ball_rolling_diagram(s).learner.tied_groups == groups
+
+
+def test_defaults_keep_the_measured_behaviour():
+    s, _ = load_scenario(SCENARIO)
+    assert s.learner.tie_residual == "pairs" and s.learner.residual_in_lcs
+    assert s.gait.use_learned_gap and s.gait.floor == "gap"
