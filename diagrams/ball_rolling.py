@@ -95,6 +95,7 @@ def c3_options(s: BallRollingScenario, phase: str, num_lambda: int) -> C3Options
     return C3Options.from_dict(dict(
         horizon=c.horizon, admm_iter=c.admm_iter, projection=c.projection,
         qp_backend=c.qp_backend, rho_scale=c.rho_scale, warm_start=c.warm_start,
+        c3plus_reference=c.c3plus_reference,
         q_diag=q, qn_diag=q, r_diag=c.r_diag or [0.01] * 3,
         g_diag=c.g_diag or [0.001] * len(STATE_NAMES) + [1000.0] * num_lambda + [0.001] * 3,
         u_diag=c.u_diag or [100.0] * len(STATE_NAMES) + [1.0] * (num_lambda + 3)))

@@ -25,6 +25,8 @@ class C3Config:
     warm_start: bool = True
     predict_state: bool = False    # plan from the state predicted at the plan's effect time
     predict_latency_s: float = -1.0  # that lead, s; < 0: measured solve time + transport
+    c3plus_reference: bool = False # C3+ as DAIRLab/c3's C3Plus: G on lam, eta only, final
+                                   # QP on delta (systems/c3/solver.py)
     q_diag: List[float] = dc.field(default_factory=list)
     r_diag: List[float] = dc.field(default_factory=list)
     g_diag: List[float] = dc.field(default_factory=list)

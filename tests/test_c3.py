@@ -362,3 +362,30 @@ def test_missing_keys_and_bad_solve_inputs_raise():
         bad_g.solve(lcs, np.zeros(4))
     with pytest.raises(ValueError):                       # LCS sizes differ from options
         C3Solver(ballroll_c3_options()).solve(lcs, np.zeros(4))
+
+
+# --- C3+ as DAIRLab/c3's C3Plus ------------------------------------------------------
+
+def test_c3plus_reference_mode_stabilises_the_cartpole():
+    xs, touched = _closed_loop(cartpole_c3_options(c3plus_reference=True), X0S[0])
+    assert touched
+    _assert_stabilised(xs)
+
+
+def test_c3plus_reference_mode_ignores_g_on_x_and_u_and_ends_on_delta():
+    """Reference mode: the plan does not change when G's x, u entries change (they are
+    not used), and the final QP tracks delta (so its lam is closer to delta's than the
+    default's final QP, which tracks delta - w, is to its own delta)."""
+    lcs = cartpole_lcs()
+    x0 = np.array(X0S[0])
+    base = dict(warm_start=False, c3plus_reference=True)
+    a = C3Solver(cartpole_c3_options(**base)).solve(lcs, x0)
+    g_other = np.r_[5.0 * np.ones(4), 0.1 * np.ones(2), 3.0]
+    b = C3Solver(cartpole_c3_options(G=g_other, **base)).solve(lcs, x0)
+    np.testing.assert_array_equal(a.u_plan, b.u_plan)
+    default = C3Solver(cartpole_c3_options(G=g_other, warm_start=False)).solve(lcs, x0)
+    assert np.abs(default.u_plan - a.u_plan).max() > 1e-6       # the default does use G
+    n, m = 4, 2
+    gap_ref = np.abs(a.lam_plan - a.delta[:, n:n + m]).max()
+    gap_def = np.abs(default.lam_plan - default.delta[:, n:n + m]).max()
+    assert gap_ref < gap_def

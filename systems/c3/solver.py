@@ -17,6 +17,11 @@ trajectory (lam, u from delta, x rolled out through the LCS dynamics).
 Also as in the reference: when H_0 = 0 the initial force lam_0 does not depend on the
 input, so it is fixed to the LCP solution at x0 (`fix_initial_force`).
 
+`c3plus_reference=True` makes C3+ behave as DAIRLab/c3's `C3Plus`: the consensus cost
+G acts on lam and eta only (its x and u entries are ignored), and the final QP step's
+target is delta itself instead of delta - w. The default (False) keeps G on all of z
+and the final target delta - w, as for the other projections.
+
 Fall-backs are never silent: every solve reports in `C3Solution.info["fallbacks"]` (and
 adds to `C3Solver.fallbacks`, the totals since construction) how often
   qp_unrefined             the OSQP QP step's exact refinement failed (OSQP's eps answer used),
@@ -124,6 +129,7 @@ class C3Options:
     end_on_qp_step: bool = True
     fix_initial_force: bool = True
     qp_projection_alpha: float = 0.01
+    c3plus_reference: bool = False  # C3+ as DAIRLab/c3's C3Plus (module docstring)
 
     def __post_init__(self):
         for name in ("horizon", "admm_iter"):
@@ -166,7 +172,7 @@ class C3Options:
         if self.qp_backend not in QP_BACKENDS:
             raise ValueError(f"C3 option qp_backend must be one of {QP_BACKENDS}, "
                              f"got {self.qp_backend!r}")
-        for name in ("warm_start", "end_on_qp_step", "fix_initial_force"):
+        for name in ("warm_start", "end_on_qp_step", "fix_initial_force", "c3plus_reference"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"C3 option {name} must be true or false")
         a = self.qp_projection_alpha
@@ -188,7 +194,7 @@ class C3Options:
 
     _KEYS = ("horizon", "q_diag", "r_diag", "qn_diag", "g_diag", "u_diag", "rho_scale",
              "admm_iter", "projection", "warm_start", "u_bounds", "x_bounds", "qp_backend",
-             "end_on_qp_step", "fix_initial_force", "qp_projection_alpha")
+             "end_on_qp_step", "fix_initial_force", "qp_projection_alpha", "c3plus_reference")
 
     @classmethod
     def from_dict(cls, d: dict, ignore=("rate_hz",)) -> "C3Options":
@@ -197,8 +203,9 @@ class C3Options:
         Keys: horizon, q_diag, r_diag, g_diag, u_diag (required); qn_diag (list, or
         "riccati"/null for the Riccati solution), rho_scale, admm_iter, projection,
         warm_start, u_bounds / x_bounds ({lower, upper} or [lower, upper]), qp_backend,
-        end_on_qp_step, fix_initial_force, qp_projection_alpha. Keys in `ignore` (the
-        controller's rate_hz) are skipped; anything else raises ValueError.
+        end_on_qp_step, fix_initial_force, qp_projection_alpha, c3plus_reference. Keys
+        in `ignore` (the controller's rate_hz) are skipped; anything else raises
+        ValueError.
         """
         if not isinstance(d, dict):
             raise ValueError(f"C3 options must be a mapping, got {type(d).__name__}")
@@ -222,7 +229,7 @@ class C3Options:
                   QN=None if qn is None else np.diag(np.array(qn, float)))
         for key in ("rho_scale", "admm_iter", "projection", "warm_start", "u_bounds",
                     "x_bounds", "qp_backend", "end_on_qp_step", "fix_initial_force",
-                    "qp_projection_alpha"):
+                    "qp_projection_alpha", "c3plus_reference"):
             if key in d:
                 kw[key] = d[key]
         try:
@@ -423,6 +430,11 @@ class C3Solver:
                 raise ValueError(f"x_target must be {n} or [{N + 1}, {n}] finite numbers")
         G, U = self.weights(s0)
         c3plus = o.projection == "c3plus"
+        reference = c3plus and o.c3plus_reference
+        if reference:                  # DAIRLab/c3 C3Plus: consensus on lam, eta only
+            G = G.copy()
+            G[:, :n] = 0.0
+            G[:, n + m:n + m + k] = 0.0
         nz = G.shape[1]
 
         if all(s is s0 for s in seq):
@@ -470,7 +482,7 @@ class C3Solver:
             w /= o.rho_scale
             scale *= o.rho_scale
         if o.end_on_qp_step:
-            z, x = qp.solve(scale, delta - w)
+            z, x = qp.solve(scale, delta if reference else delta - w)
             lam_plan, u_plan = z[:, n:n + m], z[:, n + m:n + m + k]
         else:
             lam_plan, u_plan = delta[:, n:n + m], delta[:, n + m:n + m + k]
