@@ -96,3 +96,15 @@ def test_panda_lcs_residual_alone_makes_contact(tmp_path):
     s = _run(tmp_path, *LCS_ONLY, "robot=panda")
     assert s["first_contact_s"] is not None and s["first_contact_s"] < 6.0
     assert s["circle_progress"] > 0.15
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("adaptation, min_laps, max_laps", [(True, 4, 99), (False, 0, 0)])
+def test_paper_experiment_with_the_residual_in_the_lcs_only(tmp_path, adaptation, min_laps,
+                                                            max_laps):
+    """Panda, camera on, 90 s, 5 mm error, gait heights and floor independent of the
+    learner (scenarios/ball_rolling_lcs_only.yaml)."""
+    from adaptive_c3.tools.run import run_scenario
+    summary, _ = run_scenario(SCENARIO_DIR / "ball_rolling_lcs_only.yaml", tmp_path / "run",
+                              [f"learner.enabled={str(adaptation).lower()}"])
+    assert min_laps <= summary["laps"] <= max_laps
