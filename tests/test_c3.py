@@ -389,3 +389,19 @@ def test_c3plus_reference_mode_ignores_g_on_x_and_u_and_ends_on_delta():
     gap_ref = np.abs(a.lam_plan - a.delta[:, n:n + m]).max()
     gap_def = np.abs(default.lam_plan - default.delta[:, n:n + m]).max()
     assert gap_ref < gap_def
+
+
+def test_bench_rows_on_the_real_ball_model_lcs():
+    """The c3/ballroll_model rows solve on the controller model's Anitescu LCSs (n 19,
+    m 8, k 3), with the shipped roll-phase options, without fall-backs."""
+    from adaptive_c3.tools.bench.c3_ball_model import ball_model_problems, run_ball_model_rows
+    problems, options = ball_model_problems(2)
+    for lcs, x, xt in problems:
+        assert (lcs.num_states, lcs.num_lambda, lcs.num_inputs) == (19, 8, 3)
+        assert lcs.dt == pytest.approx(0.1)
+        sol = C3Solver(options).solve(lcs, x, xt)
+        _check_ballroll_plan(sol, lcs, x, "c3plus")
+    rows = {r["name"]: r for r in run_ball_model_rows(quick=True)}
+    ours = rows["c3/ballroll_model/c3plus/kkt"]
+    assert ours["baseline"] in rows and ours["solves"] == 8
+    assert sum(ours["fallbacks"].values()) == 0
