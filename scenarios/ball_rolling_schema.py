@@ -102,7 +102,8 @@ class ImpedanceGains:
 
 @dc.dataclass
 class CameraConfig:
-    enabled: bool = True             # False: the estimator reads the true ball pose plus noise
+    enabled: bool = True             # False: the estimator reads the true ball pose plus
+                                     # position_noise_m of noise (default 0: noise-free)
     rate_hz: float = 80.0
     width: int = 320
     height: int = 240
