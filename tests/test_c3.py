@@ -401,7 +401,8 @@ def test_bench_rows_on_the_real_ball_model_lcs():
         assert lcs.dt == pytest.approx(0.1)
         sol = C3Solver(options).solve(lcs, x, xt)
         _check_ballroll_plan(sol, lcs, x, "c3plus")
-    rows = {r["name"]: r for r in run_ball_model_rows(quick=True)}
+    from adaptive_c3.tools.bench.c3 import FreshMathProgC3
+    rows = {r["name"]: r for r in run_ball_model_rows(FreshMathProgC3, quick=True)}
     ours = rows["c3/ballroll_model/c3plus/kkt"]
     assert ours["baseline"] in rows and ours["solves"] == 8
     assert sum(ours["fallbacks"].values()) == 0

@@ -363,7 +363,7 @@ def run_bench(quick: bool = False) -> list[dict]:
     k["meets_target"] = bool(k["median_ms"] <= 2.0 and k["speedup"] >= 10.0)
     rows.extend(brows.values())
     from adaptive_c3.tools.bench.c3_ball_model import run_ball_model_rows
-    rows.extend(run_ball_model_rows(quick))     # the real ball-model LCSs
+    rows.extend(run_ball_model_rows(FreshMathProgC3, quick))   # the real ball-model LCSs
     return rows
 
 

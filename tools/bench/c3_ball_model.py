@@ -59,13 +59,14 @@ def _timed_solves(solve, problems):
     return np.asarray(times) * 1e3
 
 
-def run_ball_model_rows(quick: bool = False) -> list[dict]:
+def run_ball_model_rows(baseline, quick: bool = False) -> list[dict]:
+    """The two rows; baseline: the fresh-MathematicalProgram C3 class
+    (tools/bench/c3.FreshMathProgC3, passed in so that module can call this one)."""
     from adaptive_c3.systems.c3.solver import C3Solver
-    from adaptive_c3.tools.bench.c3 import FreshMathProgC3
     problems, options = ball_model_problems(8 if quick else 24)
     solver = C3Solver(options)           # warm-started from solve to solve, as in a run
     ours = _timed_solves(lambda lcs, x, xt: solver.solve(lcs, x, xt), problems)
-    fresh = FreshMathProgC3(options)
+    fresh = baseline(options)
     base = _timed_solves(fresh.solve, problems[: 4 if quick else 8])
     base_name = "c3/ballroll_model/baseline_fresh_mathprog_c3plus"
     note = f"{len(problems)} Anitescu LCSs of the ball-rolling model (EE on the ball)"
