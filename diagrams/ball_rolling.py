@@ -95,6 +95,7 @@ def c3_options(s: BallRollingScenario, phase: str, num_lambda: int) -> C3Options
     return C3Options.from_dict(dict(
         horizon=c.horizon, admm_iter=c.admm_iter, projection=c.projection,
         qp_backend=c.qp_backend, rho_scale=c.rho_scale, warm_start=c.warm_start,
+        c3plus_reference=c.c3plus_reference,
         q_diag=q, qn_diag=q, r_diag=c.r_diag or [0.01] * 3,
         g_diag=c.g_diag or [0.001] * len(STATE_NAMES) + [1000.0] * num_lambda + [0.001] * 3,
         u_diag=c.u_diag or [100.0] * len(STATE_NAMES) + [1.0] * (num_lambda + 3)))
@@ -250,7 +251,8 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
     learner = builder.AddSystem(ResidualLearner(
         learner_options(s), len(STATE_NAMES), 3, num_lambda, rate_hz=LEARNER_SAMPLE_HZ,
         enabled=s.learner.enabled, transition_dt=dt_learn, transition_stride=stride,
-        input_lag=1, tied_groups=_pair_groups(num_lambda),
+        input_lag=1,
+        tied_groups=_pair_groups(num_lambda) if s.learner.tie_residual == "pairs" else (),
         input_from_motion=(ee_input_from_motion(m.ee_mass, GRAVITY)
                            if m.learner_input == "motion" else None)))
     to_plan = builder.AddSystem(Gain(dt_learn / m.planning_dt, num_lambda))
@@ -266,7 +268,8 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
         feedforward=s.impedance.feedforward, model_ee_weight=m.ee_mass * GRAVITY,
         predict_state=s.c3.predict_state,
         predict_latency_s=s.c3.predict_latency_s if s.c3.predict_latency_s >= 0 else None,
-        transport_s=transport_s, warm_start_shift=s.c3.warm_start_shift))
+        transport_s=transport_s, warm_start_shift=s.c3.warm_start_shift,
+        residual_in_lcs=s.learner.residual_in_lcs))
 
     u_port = planner.GetOutputPort("lcs_input")
     for sys_ in {lcs_sys, loop_sys, learn_sys}:

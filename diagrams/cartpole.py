@@ -56,6 +56,7 @@ def cartpole_c3_options(s: CartpoleScenario):
     return C3Options.from_dict(dict(
         horizon=c.horizon, admm_iter=c.admm_iter, projection=c.projection,
         qp_backend=c.qp_backend, rho_scale=c.rho_scale, warm_start=c.warm_start,
+        c3plus_reference=c.c3plus_reference,
         q_diag=c.q_diag or CARTPOLE_Q, r_diag=c.r_diag or CARTPOLE_R,
         g_diag=c.g_diag or [0.1] * 6 + [0.0],
         u_diag=c.u_diag or [1000.0] * 4 + [1.0] * 2 + [0.0]))  # reference cart-pole U

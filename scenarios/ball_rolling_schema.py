@@ -67,6 +67,22 @@ class Gait:
     return_speed: float = 0.5        # m/s, EE speed in waypoint return phases
     place_xy_tolerance: float = 0.0  # m; > 0: lower the EE in the place phase only once
                                      # the measured EE is this close (x-y) to its place point
+    use_learned_gap: bool = True     # the learned EE-ball gap offset lowers the gait's
+                                     # heights (and the "gap" floor); false: gap 0 there
+    floor: str = "gap"               # gap: the commanded EE height >= touching height -
+                                     # gap + min_height (moves with the learned gap);
+                                     # table: >= ee_radius + table_clearance above the
+                                     # table (independent of the learner and the model ball)
+    table_clearance: float = 0.005   # m, the "table" floor's clearance of the EE sphere
+
+
+@dc.dataclass
+class RollingLearnerConfig(LearnerConfig):
+    """The learner, plus where the ball-rolling task uses its residual."""
+    tie_residual: str = "pairs"      # pairs: one value per contact pair (the EE-ball rows
+                                     # share one, the ball-table rows another); none: every
+                                     # row free, as the paper's r_comp
+    residual_in_lcs: bool = True     # C3 plans with the LCS plus r_comp; false: without
 
 
 @dc.dataclass
@@ -86,7 +102,8 @@ class ImpedanceGains:
 
 @dc.dataclass
 class CameraConfig:
-    enabled: bool = True             # False: the estimator reads the true ball pose plus noise
+    enabled: bool = True             # False: the estimator reads the true ball pose plus
+                                     # position_noise_m of noise (default 0: noise-free)
     rate_hz: float = 80.0
     width: int = 160                 # px; 320 x 240 until issue 18: the render cost twice
     height: int = 120                # as much, the estimate 0.3 mm (mean) closer (README)
@@ -102,7 +119,7 @@ class BallRollingScenario:
     point_ee_mass: float = 1.0       # kg, the point EE's mass when robot: point_ee
     model: RollingModel = dc.field(default_factory=RollingModel)
     c3: C3Config = dc.field(default_factory=lambda: C3Config(horizon=5, rate_hz=80.0, rho_scale=2.0))
-    learner: LearnerConfig = dc.field(default_factory=lambda: LearnerConfig(
+    learner: RollingLearnerConfig = dc.field(default_factory=lambda: RollingLearnerConfig(
         enabled=True, learning_rate=5e-3, epsilon=2e-5, gamma=1e-2, rate_hz=20.0))
     target: TargetPath = dc.field(default_factory=TargetPath)
     gait: Gait = dc.field(default_factory=Gait)
@@ -142,6 +159,11 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
     positive("target.radius", s.target.radius)
     g = s.gait
     need(g.return_mode in ("c3", "waypoint"), f"gait.return_mode must be c3 or waypoint, got '{g.return_mode}'")
+    need(g.floor in ("gap", "table"), f"gait.floor must be gap or table, got '{g.floor}'")
+    need(math.isfinite(g.table_clearance) and 0 <= g.table_clearance < 0.2,
+         f"gait.table_clearance must be in [0, 0.2) m, got {g.table_clearance}")
+    need(s.learner.tie_residual in ("pairs", "none"),
+         f"learner.tie_residual must be pairs or none, got '{s.learner.tie_residual}'")
     for key in ("roll_s", "return_s", "back_distance", "lift_height", "max_ee_speed",
                 "return_ee_weight", "return_speed"):
         positive(f"gait.{key}", getattr(g, key))

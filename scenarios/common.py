@@ -27,6 +27,8 @@ class C3Config:
     predict_latency_s: float = -1.0  # that lead, s; < 0: measured solve time + transport
     warm_start_shift: str = "knot"  # knot: the last plan moved one LCS step | elapsed: moved
                                     # by the time between the plans' start states
+    c3plus_reference: bool = False # C3+ as DAIRLab/c3's C3Plus: G on lam, eta only, final
+                                   # QP on delta (systems/c3/solver.py)
     q_diag: List[float] = dc.field(default_factory=list)
     r_diag: List[float] = dc.field(default_factory=list)
     g_diag: List[float] = dc.field(default_factory=list)

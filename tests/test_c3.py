@@ -244,12 +244,52 @@ def test_target_shifts_the_plan():
     assert np.abs(sol.u0).max() < np.abs(C3Solver(opts).solve(lcs, target).u0).max()
 
 
-def test_ballroll_size_solver_runs_all_projections():
+def _check_ballroll_plan(sol, lcs, x0, proj, n=19, m=8, k=3):
+    """The plan starts at x0 and follows the LCS dynamics; the last projected copy delta
+    lies in the set the projection promises: exact - the complementarity set; C3+ - lam
+    and its eta copy complementary; QP - lam >= 0, eta >= 0 (product only approximately
+    0, measured 4.2e-3 on this problem)."""
+    np.testing.assert_array_equal(sol.x_plan[0], x0)
+    np.testing.assert_array_equal(sol.u0, sol.u_plan[0])
+    x, u, lam = sol.x_plan, sol.u_plan, sol.lam_plan
+    pred = x[:-1] @ lcs.A.T + u @ lcs.B.T + lam @ lcs.D.T + lcs.d
+    np.testing.assert_allclose(x[1:], pred, atol=1e-10)
+    d_lam, d_x, d_u = sol.delta[:, n:n + m], sol.delta[:, :n], sol.delta[:, n + m:n + m + k]
+    eta = d_x @ lcs.E.T + d_lam @ lcs.F.T + d_u @ lcs.H.T + lcs.c
+    assert d_lam.min() >= -1e-9
+    if proj == "c3plus":
+        eta_copy = sol.delta[:, n + m + k:]
+        assert eta_copy.min() >= 0.0 and np.abs(d_lam * eta_copy).max() == 0.0
+    else:
+        assert eta.min() >= -1e-9
+        assert np.abs(d_lam * eta).max() <= (1e-9 if proj == "exact" else 1e-2)
+
+
+@pytest.mark.parametrize("proj", ["c3plus", "qp", "exact"])
+def test_ballroll_size_solver_plans_are_consistent(proj):
+    """Ball-rolling-sized LCS (n 19, m 8, k 3), every projection: see _check_ballroll_plan."""
     lcs = random_ballroll_lcs(0)
     x0 = 0.05 * np.random.default_rng(1).normal(size=19)
-    for proj in ("c3plus", "qp"):
-        sol = C3Solver(ballroll_c3_options(proj)).solve(lcs, x0)
-        assert sol.u0.shape == (3,) and np.all(np.isfinite(sol.x_plan))
+    sol = C3Solver(ballroll_c3_options(proj)).solve(lcs, x0)
+    assert sol.u0.shape == (3,)
+    _check_ballroll_plan(sol, lcs, x0, proj)
+    assert sum(sol.info["fallbacks"].values()) == 0
+
+
+@pytest.mark.parametrize("proj", ["c3plus", "exact"])
+def test_ballroll_plan_check_catches_broken_plans(proj):
+    """The check fails on an unprojected delta (the QP iterate z) and on a plan whose
+    states do not follow the dynamics."""
+    import dataclasses
+    lcs = random_ballroll_lcs(0)
+    x0 = 0.05 * np.random.default_rng(1).normal(size=19)
+    sol = C3Solver(ballroll_c3_options(proj)).solve(lcs, x0)
+    with pytest.raises(AssertionError):
+        _check_ballroll_plan(dataclasses.replace(sol, delta=sol.z), lcs, x0, proj)
+    x_bad = sol.x_plan.copy()
+    x_bad[2, 0] += 1e-6
+    with pytest.raises(AssertionError):
+        _check_ballroll_plan(dataclasses.replace(sol, x_plan=x_bad), lcs, x0, proj)
 
 
 # --- options -----------------------------------------------------------------------
@@ -333,3 +373,47 @@ def test_shift_knots_moves_a_trajectory_by_fractions_of_a_knot():
     np.testing.assert_allclose(shift_knots(traj, 7.0)[:, 1], [40] * 5)
     with pytest.raises(ValueError):
         shift_knots(traj, -0.1)
+
+
+# --- C3+ as DAIRLab/c3's C3Plus ------------------------------------------------------
+
+def test_c3plus_reference_mode_stabilises_the_cartpole():
+    xs, touched = _closed_loop(cartpole_c3_options(c3plus_reference=True), X0S[0])
+    assert touched
+    _assert_stabilised(xs)
+
+
+def test_c3plus_reference_mode_ignores_g_on_x_and_u_and_ends_on_delta():
+    """Reference mode: the plan does not change when G's x, u entries change (they are
+    not used), and the final QP tracks delta (so its lam is closer to delta's than the
+    default's final QP, which tracks delta - w, is to its own delta)."""
+    lcs = cartpole_lcs()
+    x0 = np.array(X0S[0])
+    base = dict(warm_start=False, c3plus_reference=True)
+    a = C3Solver(cartpole_c3_options(**base)).solve(lcs, x0)
+    g_other = np.r_[5.0 * np.ones(4), 0.1 * np.ones(2), 3.0]
+    b = C3Solver(cartpole_c3_options(G=g_other, **base)).solve(lcs, x0)
+    np.testing.assert_array_equal(a.u_plan, b.u_plan)
+    default = C3Solver(cartpole_c3_options(G=g_other, warm_start=False)).solve(lcs, x0)
+    assert np.abs(default.u_plan - a.u_plan).max() > 1e-6       # the default does use G
+    n, m = 4, 2
+    gap_ref = np.abs(a.lam_plan - a.delta[:, n:n + m]).max()
+    gap_def = np.abs(default.lam_plan - default.delta[:, n:n + m]).max()
+    assert gap_ref < gap_def
+
+
+def test_bench_rows_on_the_real_ball_model_lcs():
+    """The c3/ballroll_model rows solve on the controller model's Anitescu LCSs (n 19,
+    m 8, k 3), with the shipped roll-phase options, without fall-backs."""
+    from adaptive_c3.tools.bench.c3_ball_model import ball_model_problems, run_ball_model_rows
+    problems, options = ball_model_problems(2)
+    for lcs, x, xt in problems:
+        assert (lcs.num_states, lcs.num_lambda, lcs.num_inputs) == (19, 8, 3)
+        assert lcs.dt == pytest.approx(0.1)
+        sol = C3Solver(options).solve(lcs, x, xt)
+        _check_ballroll_plan(sol, lcs, x, "c3plus")
+    from adaptive_c3.tools.bench.c3 import FreshMathProgC3
+    rows = {r["name"]: r for r in run_ball_model_rows(FreshMathProgC3, quick=True)}
+    ours = rows["c3/ballroll_model/c3plus/kkt"]
+    assert ours["baseline"] in rows and ours["solves"] == 8
+    assert sum(ours["fallbacks"].values()) == 0

@@ -449,3 +449,43 @@ def test_accepts_lists_and_column_q():
 def test_bad_input_raises(solver, M, q, match):
     with pytest.raises(ValueError, match=match):
         solver(M, q)
+
+
+def _nearly_singular_pd(rng, m=8, rank=5):
+    """PD M = J J' + 1e-9 I (condition number ~1e10) and q with a known bounded solution."""
+    J = rng.standard_normal((m, rank))
+    M = J @ J.T + 1e-9 * np.eye(m)
+    act = rng.random(m) < 0.5
+    z_star = np.where(act, rng.random(m), 0.0)
+    q = np.where(act, 0.0, rng.random(m)) - M @ z_star
+    return M, q
+
+
+def test_regularised_retry_on_nearly_singular_pd():
+    """Plain Lemke fails on some of these problems (round-off picks a wrong basis); the
+    regularised retry solves them on the original M and says so."""
+    rng = np.random.default_rng(0)
+    plain_failures, retried = 0, []
+    for _ in range(300):
+        M, q = _nearly_singular_pd(rng)
+        assert np.linalg.cond(M) > 1e9
+        plain = solve_lcp(M, q, regularize=False)
+        assert plain.regularization == 0.0
+        if plain.solved:
+            continue
+        plain_failures += 1
+        res = solve_lcp(M, q)
+        if res.solved:
+            assert res.regularization > 0.0 and "regularised retry" in res.message
+            assert_valid(M, q, res)
+            retried.append(res)
+    assert plain_failures >= 3                      # the problem class does break Lemke
+    assert len(retried) == plain_failures           # measured: 6 of 300, all repaired
+
+
+def test_retry_is_not_used_on_well_conditioned_problems():
+    rng = np.random.default_rng(1)
+    for _ in range(50):
+        M = p_matrix_spd(rng, 6)
+        res = solve_lcp(M, rng.standard_normal(6))
+        assert res.solved and res.regularization == 0.0

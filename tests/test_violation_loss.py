@@ -346,3 +346,68 @@ def test_optional_learning_rate_decay():
     np.testing.assert_allclose(d1, d_ref / 3.5, rtol=1e-12)
     with pytest.raises(ValueError, match="lr_decay_steps"):
         LearnerOptions(epsilon=1.0, gamma=0.01, lr_decay_steps=-1.0)
+
+
+# ------------------------------------------------------------------ independent l_eps
+def paper_loss(x_next, x, u, lcs, r, eps, gamma, Qd):
+    """l_eps and (lam*, eta*) built by hand from the paper's formula (Algorithm 1):
+    min over lam, eta >= 0 of 1/2 (D lam + z)' Qd (D lam + z)
+    + (1/eps) (lam'eta + 1/(2 gamma) ||q + F lam + r - eta||^2), z = A x + B u + d - x+,
+    q = E x + H u + c - solved by a generic bounded optimiser from several starts (the
+    problem is convex for 0 < gamma < sigma_min(F + F')), not by the module's QP data."""
+    from scipy.optimize import minimize
+    m = lcs.num_lambda
+    z = lcs.A @ x + lcs.B @ u + lcs.d - x_next
+    q = lcs.E @ x + lcs.H @ u + lcs.c
+
+    def scaled(y):        # eps * l_eps and its gradient, with y = [lam, eta]
+        lam, eta = y[:m], y[m:]
+        e = lcs.D @ lam + z
+        w = q + lcs.F @ lam + r - eta
+        f = 0.5 * eps * e @ Qd @ e + lam @ eta + w @ w / (2 * gamma)
+        g_lam = eps * lcs.D.T @ (Qd @ e) + eta + lcs.F.T @ w / gamma
+        g_eta = lam - w / gamma
+        return f, np.concatenate([g_lam, g_eta])
+
+    best = None
+    rng = np.random.default_rng(0)
+    for start in [np.zeros(2 * m), np.abs(np.r_[np.zeros(m), q + r])] + [
+            rng.uniform(0, 1, 2 * m) for _ in range(4)]:
+        res = minimize(scaled, start, jac=True, method="L-BFGS-B",
+                       bounds=[(0, None)] * (2 * m),
+                       options=dict(ftol=1e-16, gtol=1e-13, maxiter=20000))
+        if best is None or res.fun < best.fun:
+            best = res
+    lam, eta = best.x[:m], best.x[m:]
+    grad = (q + lcs.F @ lam + r - eta) / (eps * gamma)      # the paper's envelope gradient
+    return best.fun / eps, grad
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_loss_and_gradient_match_the_papers_formula_built_by_hand(seed):
+    rng = np.random.default_rng(100 + seed)
+    for _ in range(50):        # a transition on which data and model disagree (loss > 0)
+        m = int(rng.integers(1, 5))
+        lcs = random_lcs(rng, int(rng.integers(2, 6)), 2, m)
+        eps, gamma = 1e-2, 0.5 * valid_gamma(lcs)
+        Qd = np.diag(rng.uniform(0.5, 5.0, lcs.num_states))
+        x_next, x, u = random_transition(rng, lcs)
+        r = 0.1 * rng.standard_normal(m)
+        got_loss, got_grad = violation_loss(x_next, x, u, lcs, r, eps, gamma, Qd)
+        if got_loss > 1e-3:
+            break
+    want_loss, want_grad = paper_loss(x_next, x, u, lcs, r, eps, gamma, Qd)
+    assert want_loss > 1e-3
+    assert _agrees((got_loss, got_grad), (want_loss, want_grad))
+    # the check has teeth: broken inputs to the module (r off by 0.01, Qd doubled;
+    # measured loss changes >= 3 %) do not pass it
+    for r_bad, Qd_bad in ((r + 0.01, Qd), (r, 2 * Qd)):
+        bad = violation_loss(x_next, x, u, lcs, r_bad, eps, gamma, Qd_bad)
+        assert not _agrees(bad, (want_loss, want_grad))
+
+
+def _agrees(got, want) -> bool:
+    """Loss within 1e-6 relative, gradient within 1e-4 of its largest entry."""
+    (gl, gg), (wl, wg) = got, want
+    return bool(abs(gl - wl) <= 1e-6 * abs(wl)
+                and np.abs(gg - wg).max() <= 1e-4 * np.abs(wg).max())

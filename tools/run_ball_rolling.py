@@ -157,6 +157,7 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         "loss_final": float(loss[-1, 0]),
         "c3_solve_time": handles.planner.solve_time_stats(),
         "planner_holds": handles.planner.failures,
+        "c3_fallbacks": handles.planner.fallback_counts(),
     }
     _, ball = logs["ball_true"]
     _, ee = logs["ee"]

@@ -92,6 +92,8 @@ def run_cartpole(scenario, scenario_text: str, out: Path) -> dict:
     }
     if hasattr(handles.controller, "solve_time_stats"):
         summary["c3_solve_time"] = handles.controller.solve_time_stats()
+    if hasattr(handles.controller, "fallback_counts"):
+        summary["c3_fallbacks"] = handles.controller.fallback_counts()
     extras = {"lambda": lam}
     if handles.learner is not None:
         _, r = logs["r_comp"]

@@ -124,6 +124,10 @@ class C3Controller(LeafSystem):
         return {"count": int(t.size), "median_s": float(np.median(t)),
                 "max_s": float(t.max()), "mean_s": float(t.mean())}
 
+    def fallback_counts(self) -> dict:
+        """The solver's fall-back totals (systems/c3/solver.py FALLBACKS) and `rejected`."""
+        return {**self._solver.fallbacks, "rejected": self.rejected}
+
     def reset_stats(self):
         self._solve_times.clear()
         self.rejected = 0

@@ -14,7 +14,8 @@ Three projections, all weighted by a diagonal U (the "U-norm"
   lam' F lam, with the lam-distance measured in alpha F instead of U_lam.
   All knots are stacked into one block-diagonal OSQP problem (set up once, then only
   q changes between ADMM iterations), solved loosely and then refined per knot to the
-  exact optimum by an active-set step (qp.refine_active_set).
+  exact optimum by an active-set step (qp.refine_active_set); OSQP's iteration limits
+  and failed refinements (the unrefined iterate is returned) are counted.
 * `ExactProjector` - the exact U-norm projection by enumerating the complementary
   modes (m <= 10); ground truth for tests and for small m.
 """
@@ -93,13 +94,20 @@ class QpProjector:
     approximately lam'eta = 0 (see tests/test_c3_projection.py for measured bounds).
     """
 
-    def __init__(self, alpha: float = 0.01, eps: float = 1e-7):
+    def __init__(self, alpha: float = 0.01, eps: float = 1e-7, max_iter: int = 20000,
+                 refine_iter: int = 60):
         if not 0.0 <= alpha <= 1.0:
             raise ValueError(f"QP projection alpha must be in [0, 1], got {alpha}")
         self.alpha = float(alpha)
         self.eps = float(eps)
+        self.max_iter, self.refine_iter = int(max_iter), int(refine_iter)
         self._solver = None
         self._key = None
+        # Counted over the projector's life (setup does not reset them): OSQP stopped at
+        # its iteration/time limit, and knots whose exact refinement failed so OSQP's
+        # unrefined iterate was returned.
+        self.iteration_limits = 0
+        self.refine_failures = 0
 
     def setup(self, E, F, H, c, U):
         """Set the per-knot data: E [N,m,n], F [N,m,m], H [N,m,k], c [N,m], U [N,nz]."""
@@ -162,7 +170,6 @@ class QpProjector:
         self._A[:, m:] = np.concatenate([E, F, H], axis=2)
         self._lo = np.concatenate([np.zeros((N, m)), -c], axis=1)
         self._hi = np.full(2 * m, np.inf)
-        self.refine_failures = 0
         lower = np.concatenate([np.r_[np.zeros(m), -c[j]] for j in range(N)])
         upper = np.full(2 * m * N, np.inf)
         key = (N, n, m, k)
@@ -174,7 +181,7 @@ class QpProjector:
             self._solver = osqp.OSQP()
             self._solver.setup(P, np.zeros(nvar), A, lower, upper, verbose=False,
                                eps_abs=self.eps, eps_rel=self.eps, polishing=False,
-                               max_iter=20000, warm_starting=True)
+                               max_iter=self.max_iter, warm_starting=True)
             self._key = key
         return self
 
@@ -188,6 +195,7 @@ class QpProjector:
         res = self._solver.solve(raise_error=False)
         if res.info.status_val not in (1, 2, 7, 8):  # solved (inaccurate), iter/time limit
             raise RuntimeError(f"QP projection failed: OSQP status {res.info.status}")
+        self.iteration_limits += res.info.status_val in (7, 8)
         d = np.asarray(res.x, float).reshape(N, -1)
         g = q - self._reg * y
         # Exact solve on OSQP's active set, all knots in one batched KKT solve (an
@@ -222,7 +230,7 @@ class QpProjector:
             redo = range(N)
         for j in redo:
             d[j], ok = refine_active_set(self._P[j], g[j], A[j], lo[j], self._hi, d[j],
-                                         100.0 * self.eps)
+                                         100.0 * self.eps, self.refine_iter)
             self.refine_failures += not ok
         return d
 

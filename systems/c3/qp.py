@@ -17,8 +17,9 @@ with z_j = [x_j, lam_j, u_j(, eta_j)]. Q_N is the terminal weight.
   in the constructor (once per C3 solve). No inequality bounds.
 * `OsqpQp` - the same condensed QP with bounds, by the `osqp` package (set up once per
   size, then P, q, A, l, u updated and warm-started); OSQP's loose solution is refined
-  to the exact optimum by a primal active-set step (`refine_active_set`). The back-end
-  used when bounds are present.
+  to the exact optimum by a primal active-set step (`refine_active_set`); when that
+  fails OSQP's answer is used and counted (`unrefined`). The back-end used when bounds
+  are present.
 * `OsqpSparseQp`, `DrakeOsqpQp` - the non-condensed (sparse) QP with the `osqp` package
   and as a persistent Drake MathematicalProgram + OsqpSolver: an independent
   formulation for tests and the measured comparison in tools/bench/c3.py.
@@ -195,10 +196,12 @@ class OsqpQp:
     C3 solve) and warm-started from the previous solution.
     """
 
-    def __init__(self, eps: float = 1e-3, max_iter: int = 20000):
-        self.eps, self.max_iter = eps, max_iter
+    def __init__(self, eps: float = 1e-3, max_iter: int = 20000, refine_iter: int = 60):
+        self.eps, self.max_iter, self.refine_iter = eps, max_iter, refine_iter
         self._solver = None
         self._key = None
+        # QP steps whose exact refinement failed, so OSQP's loose (eps) answer was used
+        self.unrefined = 0
 
     def setup(self, data: QpStepData):
         cond = _Condensed(data)
@@ -259,9 +262,11 @@ class OsqpQp:
         x_start = np.asarray(res.x, float)
         if not np.all(np.isfinite(x_start)):
             x_start = np.zeros_like(x_start)
-        v, ok = refine_active_set(H, g, A, lo, hi, x_start, 10.0 * self.eps)
+        v, ok = refine_active_set(H, g, A, lo, hi, x_start, 10.0 * self.eps,
+                                  self.refine_iter)
         if not ok and status not in (1, 2):
             raise RuntimeError(f"OSQP QP step failed: {res.info.status}")
+        self.unrefined += not ok
         return cond.unpack(v)
 
 

@@ -16,6 +16,19 @@ cart-pole setting). With `end_on_qp_step=False` the plan is the projected delta
 trajectory (lam, u from delta, x rolled out through the LCS dynamics).
 Also as in the reference: when H_0 = 0 the initial force lam_0 does not depend on the
 input, so it is fixed to the LCP solution at x0 (`fix_initial_force`).
+
+`c3plus_reference=True` makes C3+ behave as DAIRLab/c3's `C3Plus`: the consensus cost
+G acts on lam and eta only (its x and u entries are ignored), and the final QP step's
+target is delta itself instead of delta - w. The default (False) keeps G on all of z
+and the final target delta - w, as for the other projections.
+
+Fall-backs are never silent: every solve reports in `C3Solution.info["fallbacks"]` (and
+adds to `C3Solver.fallbacks`, the totals since construction) how often
+  qp_unrefined             the OSQP QP step's exact refinement failed (OSQP's eps answer used),
+  projection_iter_limit    the QP projection's OSQP stopped at its iteration limit,
+  projection_unrefined     a knot's QP projection was not refined (OSQP's iterate used),
+  lam0_lcp_failed          the LCP for lam_0 was not solved (lam_0 left free),
+  lam0_lcp_regularized     that LCP needed Lemke's regularised retry (systems/contact/lcp.py).
 """
 from __future__ import annotations
 
@@ -32,10 +45,12 @@ from adaptive_c3.systems.contact.lcp import solve_lcp
 from adaptive_c3.systems.contact.lcs import Lcs, LcsSequence, as_sequence
 
 __all__ = ["C3Options", "C3Solution", "C3Solver", "cartpole_c3_options",
-           "PROJECTIONS", "QP_BACKENDS"]
+           "PROJECTIONS", "QP_BACKENDS", "FALLBACKS"]
 
 PROJECTIONS = ("c3plus", "qp", "exact")
 QP_BACKENDS = ("auto", "kkt", "osqp", "osqp_sparse", "drake_osqp")
+FALLBACKS = ("qp_unrefined", "projection_iter_limit", "projection_unrefined",
+             "lam0_lcp_failed", "lam0_lcp_regularized")
 
 
 def _matrix(name, value, shape=None) -> np.ndarray:
@@ -114,6 +129,7 @@ class C3Options:
     end_on_qp_step: bool = True
     fix_initial_force: bool = True
     qp_projection_alpha: float = 0.01
+    c3plus_reference: bool = False  # C3+ as DAIRLab/c3's C3Plus (module docstring)
 
     def __post_init__(self):
         for name in ("horizon", "admm_iter"):
@@ -156,7 +172,7 @@ class C3Options:
         if self.qp_backend not in QP_BACKENDS:
             raise ValueError(f"C3 option qp_backend must be one of {QP_BACKENDS}, "
                              f"got {self.qp_backend!r}")
-        for name in ("warm_start", "end_on_qp_step", "fix_initial_force"):
+        for name in ("warm_start", "end_on_qp_step", "fix_initial_force", "c3plus_reference"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
                 raise ValueError(f"C3 option {name} must be true or false")
         a = self.qp_projection_alpha
@@ -178,7 +194,7 @@ class C3Options:
 
     _KEYS = ("horizon", "q_diag", "r_diag", "qn_diag", "g_diag", "u_diag", "rho_scale",
              "admm_iter", "projection", "warm_start", "u_bounds", "x_bounds", "qp_backend",
-             "end_on_qp_step", "fix_initial_force", "qp_projection_alpha")
+             "end_on_qp_step", "fix_initial_force", "qp_projection_alpha", "c3plus_reference")
 
     @classmethod
     def from_dict(cls, d: dict, ignore=("rate_hz",)) -> "C3Options":
@@ -187,8 +203,9 @@ class C3Options:
         Keys: horizon, q_diag, r_diag, g_diag, u_diag (required); qn_diag (list, or
         "riccati"/null for the Riccati solution), rho_scale, admm_iter, projection,
         warm_start, u_bounds / x_bounds ({lower, upper} or [lower, upper]), qp_backend,
-        end_on_qp_step, fix_initial_force, qp_projection_alpha. Keys in `ignore` (the
-        controller's rate_hz) are skipped; anything else raises ValueError.
+        end_on_qp_step, fix_initial_force, qp_projection_alpha, c3plus_reference. Keys
+        in `ignore` (the controller's rate_hz) are skipped; anything else raises
+        ValueError.
         """
         if not isinstance(d, dict):
             raise ValueError(f"C3 options must be a mapping, got {type(d).__name__}")
@@ -212,7 +229,7 @@ class C3Options:
                   QN=None if qn is None else np.diag(np.array(qn, float)))
         for key in ("rho_scale", "admm_iter", "projection", "warm_start", "u_bounds",
                     "x_bounds", "qp_backend", "end_on_qp_step", "fix_initial_force",
-                    "qp_projection_alpha"):
+                    "qp_projection_alpha", "c3plus_reference"):
             if key in d:
                 kw[key] = d[key]
         try:
@@ -292,6 +309,7 @@ class C3Solver:
         self._qp_proj = None
         self._proj_key = None
         self._exact: dict = {}
+        self.fallbacks = dict.fromkeys(FALLBACKS, 0)
 
     def reset(self):
         """Forget the warm start."""
@@ -355,7 +373,8 @@ class C3Solver:
         o = self.options
         if o.projection == "qp":
             key = (tuple(seq.systems), U.tobytes())
-            if self._qp_proj is None or not (_same_systems(self._proj_key[0], key[0])
+            if self._qp_proj is None or self._proj_key is None or not (
+                    _same_systems(self._proj_key[0], key[0])
                                              and self._proj_key[1] == key[1]):
                 self._qp_proj = self._qp_proj or QpProjector(o.qp_projection_alpha)
                 self._qp_proj.setup(data.E, data.F, data.H, data.c, U)
@@ -372,6 +391,13 @@ class C3Solver:
                 cache[key] = (s, proj)
                 self._exact_groups.append((np.array(idx), proj))
             self._exact = cache
+
+    def _backend_counts(self) -> dict:
+        """Cumulative fall-back counters of the stateful back-ends (OSQP QP, QP projection)."""
+        osqp_qp, proj = self._osqp, self._qp_proj
+        return {"qp_unrefined": getattr(osqp_qp, "unrefined", 0),
+                "projection_iter_limit": getattr(proj, "iteration_limits", 0),
+                "projection_unrefined": getattr(proj, "refine_failures", 0)}
 
     def _qp(self, data):
         o = self.options
@@ -420,6 +446,11 @@ class C3Solver:
                 raise ValueError(f"x_target must be {n} or [{N + 1}, {n}] finite numbers")
         G, U = self.weights(s0)
         c3plus = o.projection == "c3plus"
+        reference = c3plus and o.c3plus_reference
+        if reference:                  # DAIRLab/c3 C3Plus: consensus on lam, eta only
+            G = G.copy()
+            G[:, :n] = 0.0
+            G[:, n + m:n + m + k] = 0.0
         nz = G.shape[1]
 
         if all(s is s0 for s in seq):
@@ -432,15 +463,19 @@ class C3Solver:
         Qs[:N] = o.Q
         Qs[N] = self.terminal_weight(s0)
         lam0 = None
+        events = dict.fromkeys(FALLBACKS, 0)
         if o.fix_initial_force and not np.any(s0.H):
             res = solve_lcp(s0.F, s0.E @ x0 + s0.c)
             if res.solved:
                 lam0 = res.z
+            events["lam0_lcp_failed"] = int(not res.solved)
+            events["lam0_lcp_regularized"] = int(res.regularization > 0)
         data = QpStepData(**st, x0=x0, x_target=xt, Q=Qs,
                           R=np.broadcast_to(o.R, (N, k, k)), g=G, with_eta=c3plus,
                           lam0=lam0, u_bounds=o.u_bounds, x_bounds=o.x_bounds)
         qp, backend = self._qp(data)
         self._setup_projection(seq, data, U, n, m, k)
+        before = self._backend_counts()
 
         warm = warm if warm is not None else (self.last_solution if o.warm_start else None)
         delta = np.zeros((N, nz))
@@ -462,7 +497,7 @@ class C3Solver:
             w /= o.rho_scale
             scale *= o.rho_scale
         if o.end_on_qp_step:
-            z, x = qp.solve(scale, delta - w)
+            z, x = qp.solve(scale, delta if reference else delta - w)
             lam_plan, u_plan = z[:, n:n + m], z[:, n + m:n + m + k]
         else:
             lam_plan, u_plan = delta[:, n:n + m], delta[:, n + m:n + m + k]
@@ -470,11 +505,16 @@ class C3Solver:
             x[0] = x0
             for j, s in enumerate(seq):
                 x[j + 1] = s.A @ x[j] + s.B @ u_plan[j] + s.D @ lam_plan[j] + s.d
+        for key, count in self._backend_counts().items():
+            events[key] = count - before[key]
+        for key, count in events.items():
+            self.fallbacks[key] += count
         sol = C3Solution(u0=np.array(u_plan[0]), x_plan=np.array(x), lam_plan=np.array(lam_plan),
                          u_plan=np.array(u_plan), delta=delta, w=w, z=np.array(z),
                          iterations=o.admm_iter, primal_residual=primal, dual_residual=dual,
                          solve_time_s=time.perf_counter() - t_start,
                          lam0_fixed=lam0 is not None,
-                         info={"qp_backend": backend, "projection": o.projection})
+                         info={"qp_backend": backend, "projection": o.projection,
+                               "fallbacks": events})
         self.last_solution = sol
         return sol

@@ -3,7 +3,12 @@
 `solve_lcp` is Lemke's complementary pivoting method (artificial variable z0,
 covering vector of ones) with a lexicographic minimum-ratio rule, so it cannot
 cycle on degenerate problems. It is written for the small problems (m = 2..16)
-that are solved once per simulation step. `solve_lcp_enumeration` tries every
+that are solved once per simulation step. On a nearly singular problem (e.g. a PD M with
+condition number ~1e10) the tableau's round-off can end Lemke on a wrong basis or a
+ray; then one retry runs Lemke on the regularised M + eps I (eps = 1e-10 max(1, |M|))
+and re-solves the ORIGINAL M on the basis it found. The result says so
+(`LcpResult.regularization` = eps, and the message) and is `solved` only if it meets the
+tolerance on the original problem. `solve_lcp_enumeration` tries every
 complementary basis and is meant as ground truth in tests.
 """
 
@@ -29,6 +34,8 @@ class LcpResult:
     iterations: pivots (Lemke) or bases tried (enumeration).
     message: short human-readable status.
     residual: max(|z_i w_i|, -min(z), -min(w), 0) evaluated at the returned z.
+    regularization: eps of the regularised retry (M + eps I) that produced z; 0 if the
+        first Lemke run was used. z, w and residual always refer to the original M.
     """
 
     z: np.ndarray
@@ -37,6 +44,7 @@ class LcpResult:
     iterations: int
     message: str
     residual: float
+    regularization: float = 0.0
 
 
 def _check_inputs(M, q, check_finite: bool = True) -> tuple[np.ndarray, np.ndarray]:
@@ -129,16 +137,69 @@ def _solve_small(A: np.ndarray, b: np.ndarray) -> np.ndarray:
     return x
 
 
-def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10) -> LcpResult:
+# Relative size of the diagonal added by the regularised retry (times max(1, |M|)).
+REGULARIZATION = 1e-10
+
+
+def solve_lcp(M, q, max_iterations: int | None = None, tol: float = 1e-10,
+              regularize: bool = True) -> LcpResult:
     """Solve LCP(M, q) by Lemke's method with a lexicographic ratio rule.
 
     M: (m, m) matrix, q: (m,) vector. max_iterations caps the pivots
     (default 50 (m + 1)). tol: relative tolerance for pivot elements and for the
     final residual check (scaled by max(1, |q|, |M| |z|)).
+    regularize: when the first run fails (other than by the iteration cap), retry once
+    on M + eps I (module docstring); the result then has regularization = eps.
     Returns an LcpResult; solved=False (with a message) on ray termination,
     iteration cap, or a final residual above tolerance. Raises ValueError for
     malformed input.
     """
+    res = _lemke(M, q, max_iterations, tol)
+    if res.solved or not regularize or res.message.startswith("iteration cap"):
+        return res
+    M, q = np.asarray(M, float), np.asarray(q, float).reshape(-1)
+    eps = REGULARIZATION * max(1.0, float(np.abs(M).max()))
+    retry = _lemke(M + eps * np.eye(M.shape[0]), q, max_iterations, tol)
+    best = None
+    for z in (_basis_resolve(M, q, retry.z), retry.z):
+        if z is None:
+            continue
+        w = M @ z + q
+        r = _residual_nonneg_z(z, w)
+        if best is None or r < best[2]:
+            best = (z, w, r)
+    z, w, r = best
+    thresh = tol * max(1.0, float(np.abs(q).max()), float(np.abs(M).max()) * float(z.max()))
+    if r <= thresh and r < res.residual:
+        return LcpResult(z, w, True, res.iterations + retry.iterations,
+                         f"solved by Lemke after a regularised retry (eps {eps:.3g}; first "
+                         f"run: {res.message})", r, eps)
+    if r < res.residual:
+        return LcpResult(z, w, False, res.iterations + retry.iterations,
+                         f"{res.message}; regularised retry (eps {eps:.3g}) left residual "
+                         f"{r:.3g}", r, eps)
+    return LcpResult(res.z, res.w, False, res.iterations + retry.iterations,
+                     f"{res.message}; regularised retry (eps {eps:.3g}) did not help",
+                     res.residual)
+
+
+def _basis_resolve(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> np.ndarray | None:
+    """Solve the original M on the support of z: M_aa z_a = -q_a, others 0 (clipped >= 0)."""
+    a = np.flatnonzero(z > 0)
+    out = np.zeros_like(z)
+    if a.size:
+        try:
+            za = _solve_small(M[np.ix_(a, a)], -q[a])
+        except np.linalg.LinAlgError:
+            return None
+        if not np.all(np.isfinite(za)):
+            return None
+        out[a] = np.maximum(za, 0.0)
+    return out
+
+
+def _lemke(M, q, max_iterations: int | None, tol: float) -> LcpResult:
+    """One run of Lemke's method (see solve_lcp)."""
     M, q = _check_inputs(M, q, check_finite=False)
     m = q.shape[0]
     qlist = q.tolist()

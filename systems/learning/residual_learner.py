@@ -179,6 +179,11 @@ class ResidualLearner(LeafSystem):
     def options(self) -> LearnerOptions:
         return self._opts
 
+    @property
+    def tied_groups(self) -> list:
+        """Groups of residual rows that share one value (their gradients averaged)."""
+        return [list(g) for g in self._groups]
+
     def residual(self, context) -> np.ndarray:
         """r_comp in this context."""
         return context.get_discrete_state(self._xs).get_value()[self._i_r].copy()

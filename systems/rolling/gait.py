@@ -12,7 +12,11 @@ roll_s + return_s seconds it
 
 Heights are relative to the model's touching height h_touch = 2 R_model + r_ee - gap,
 where `gap` (m) is the learned EE-ball gap offset (the residual r_comp of the EE-ball
-contact times the LCS step): the learned offset shifts the return heights too.
+contact times the LCS step): the learned offset shifts the return heights too, unless
+`use_learned_gap` is off (then gap = 0 in every height). The floor of the commanded EE
+height (`floor_height`) is either h_touch + min_height ("gap", moves with the learned
+gap) or r_ee + table_clearance above the table ("table": independent of the learner and
+of the model ball).
 The return sub-phases last return_s / 3 each. Before the first period the EE settles
 for settle_s above the ball's start (the lift pose).
 
@@ -51,6 +55,9 @@ class GaitSettings:
                                     # measured EE is within this distance (x-y) of its
                                     # place point (a lagging arm lands on the object's
                                     # front and drags it back); 0: lower at once
+    use_learned_gap: bool = True    # false: gap = 0 in every height (and the "gap" floor)
+    floor: str = "gap"              # "gap" | "table" (module docstring)
+    table_clearance: float = 0.005  # m, the "table" floor's clearance of the EE sphere
 
 
 @dataclass(frozen=True)
@@ -99,6 +106,16 @@ class RollingGait:
     def touch_height(self, gap: float = 0.0) -> float:
         """Model EE-centre height when touching the ball's top, corrected by gap (m)."""
         return 2.0 * self.R + self.r_ee - gap
+
+    def gait_gap(self, learned_gap: float) -> float:
+        """The gap (m) the gait's heights use: the learned one, or 0 (use_learned_gap off)."""
+        return float(learned_gap) if self.s.use_learned_gap else 0.0
+
+    def floor_height(self, gap: float) -> float:
+        """Lowest commanded EE-centre height (m, W) given the gait's gap (see module doc)."""
+        if self.s.floor == "table":
+            return self.r_ee + self.s.table_clearance
+        return self.touch_height(gap) + self.s.min_height
 
     def ee_target(self, phase: str, x: np.ndarray, gap: float = 0.0) -> np.ndarray:
         """The EE position target (3) of a phase from the estimated state x (19)."""

@@ -25,6 +25,8 @@ Input ports (world frame W, SI units):
   lcs       abstract   Lcs θ* without residual (planning dt); the planner adds r_comp.
   lcs_loop  abstract   Lcs without residual, dt = loop period.
   r_comp    (m)        the learned residual (m/s at the planning dt); optional (0).
+                       C3's LCSs get it unless residual_in_lcs is False; the gait's
+                       heights and floor use its EE-ball gap as RollingGait decides.
 Output ports:
   ee.desired_state     (6)  desired EE tip position (m) and velocity (m/s) in W.
   ee.feedforward_force (3)  the plan's first EE force u0 minus the model EE's weight
@@ -64,7 +66,8 @@ class BallRollingPlanner(LeafSystem):
                  ee_ball_rows=(0, 1, 2, 3), planning_dt: float = 0.1,
                  feedforward: bool = True, model_ee_weight: float = 0.0,
                  predict_state: bool = False, predict_latency_s: float | None = None,
-                 transport_s: float = 0.0, warm_start_shift: str = "knot"):
+                 transport_s: float = 0.0, warm_start_shift: str = "knot",
+                 residual_in_lcs: bool = True):
         super().__init__()
         self._gait = gait
         self._roll = C3Solver(roll_options)
@@ -84,6 +87,7 @@ class BallRollingPlanner(LeafSystem):
         if warm_start_shift not in ("knot", "elapsed"):
             raise ValueError(f"warm_start_shift must be knot or elapsed, got {warm_start_shift!r}")
         self._shift_elapsed = warm_start_shift == "elapsed"
+        self._r_in_lcs = bool(residual_in_lcs)
 
         self._x_port = self.DeclareVectorInputPort("state", N_X)
         self._lcs_port = self.DeclareAbstractInputPort("lcs", AbstractValue.Make(None))
@@ -155,8 +159,10 @@ class BallRollingPlanner(LeafSystem):
         if self._predict:
             t_start += self.lead_s()
             x = predict_state_ahead(x, t_start - t)
-        gap = self.gap_offset(r)
+        gap = self._gait.gait_gap(self.gap_offset(r))
         target = self._gait.target_state(phase, x, gap)
+        if not self._r_in_lcs:
+            r = np.zeros_like(r)
         if phase != "roll" and self._gait.s.return_mode == "waypoint":
             self._waypoint(state, x, iphase, target)
             return EventStatus.Succeeded()
@@ -182,7 +188,7 @@ class BallRollingPlanner(LeafSystem):
             return EventStatus.Succeeded()
         p_des, v_des = clamp_ee_command(x[EE_POS], x_next[EE_POS], x_next[EE_VEL],
                                         self.period_s, self._gait.s.max_ee_speed)
-        floor = self._gait.touch_height(gap) + self._gait.s.min_height
+        floor = self._gait.floor_height(gap)
         if p_des[2] < floor:
             p_des[2], v_des[2] = floor, max(v_des[2], 0.0)
         cmd = np.concatenate([p_des, v_des, (sol.u0 - self._ee_weight) if self._ff else np.zeros(3), sol.u0,
@@ -215,6 +221,12 @@ class BallRollingPlanner(LeafSystem):
         """The latest C3Solution in this context (None before the first)."""
         held = context.get_abstract_state(int(self._plan)).get_value()
         return None if held is None else held[1]
+
+    def fallback_counts(self) -> dict:
+        """Fall-back totals of both C3 solvers (systems/c3/solver.py FALLBACKS) and the
+        ticks that held the EE (`holds`)."""
+        out = {k: self._roll.fallbacks[k] + self._ret.fallbacks[k] for k in self._roll.fallbacks}
+        return {**out, "holds": self.failures}
 
     def solve_time_stats(self) -> dict:
         t = np.asarray(self.solve_times, float)

@@ -7,6 +7,7 @@ Rows (median_ms over repeated solves; closed_loop_cost where a closed loop is ru
   c3/cartpole/ipopt_relaxed  - contact-implicit MPC with lam.eta <= s, s driven down over
         a few IPOPT solves per step (the smoothing approach)
   c3/ballroll/...  - a seeded random LCS of the ball-rolling size (n=19, m=8, k=3, N=5)
+  c3/ballroll_model/...  - the ball-rolling model's own LCSs (tools/bench/c3_ball_model.py)
 Closed-loop cost = sum_t dt (x'Qx + u'Ru) of the true LCS under the controller.
 """
 from __future__ import annotations
@@ -361,6 +362,8 @@ def run_bench(quick: bool = False) -> list[dict]:
     k["target_median_ms"] = 2.0
     k["meets_target"] = bool(k["median_ms"] <= 2.0 and k["speedup"] >= 10.0)
     rows.extend(brows.values())
+    from adaptive_c3.tools.bench.c3_ball_model import run_ball_model_rows
+    rows.extend(run_ball_model_rows(FreshMathProgC3, quick))   # the real ball-model LCSs
     return rows
 
 
