@@ -243,6 +243,14 @@ class AnitescuLinearizer:
             normals[i] = n
         return phi, J_n, J_t, normals
 
+    def geometry_terms(self, x):
+        """(φ, J_n, J_t, normals, N, N⁺) at x: contact geometry and the q̇ ↔ v maps
+        (no dynamics; for callers that take the smooth part once)."""
+        phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
+        N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
+        N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
+        return phi, J_n, J_t, normals, N, N_plus
+
     # ------------------------------------------------------------------ LCS
     def linearize(self, x_star, u_star, dt: float | None = None) -> Lcs:
         """θ* at (x*, u*) as an Lcs (dt defaults to the linearizer's dt)."""
@@ -256,9 +264,7 @@ class AnitescuLinearizer:
             raise ValueError(f"dt must be > 0, got {dt}")
         nq, nv, nx, nu = self.nq, self.nv, self.nx, self.nu
         f, J_f, M, M_inv = self.smooth_dynamics(x, u)
-        phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
-        N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
-        N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
+        phi, J_n, J_t, normals, N, N_plus = self.geometry_terms(x)
 
         q_star = x[:nq]
         J_c = self._E_t.T @ J_n + self._mu_edges[:, None] * J_t

@@ -181,13 +181,20 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     from adaptive_c3.tools.progress import Progress
     start = time.perf_counter()
     base = list(base)
+    cands, not_applicable = applicable_candidates(spec)
+    # stages: linearise + locate (2), one per candidate fit and pair, the error tables (1)
+    n_pair = getattr(spec, "pair_singles", 4)
+    bar = Progress(len(cands) + (n_pair * (n_pair - 1) // 2 if pairs else 0) + 3,
+                   "diagnose", unit="stages", enabled=progress)
     if hasattr(spec, "prepare"):          # time-varying models linearise along the recording
         spec.prepare(rec)
+    bar.update(1)
     P0 = patch(spec, base)
     W1, WH = make_windows(rec, 1), make_windows(rec, horizon)
     sigma = estimate_noise(P0, W1)
     floor = prediction_floor(P0, sigma, horizon)
     windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
+    bar.update(2)
     foldH, split_note = fold_ids(rec, WH)
     fold1, _ = fold_ids(rec, W1)
     stride = int(getattr(spec, "window_stride", 1))    # costly models: fewer fit windows
@@ -195,11 +202,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
-    cands, not_applicable = applicable_candidates(spec)
-    bar = Progress(len(cands) + (6 if pairs else 0), "diagnose: fitting effects", unit="fits",
-                   enabled=progress)
-    chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs)
-    bar.close()
+    chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs, offset=2)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P0 for k in prob.folds}
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
@@ -213,6 +216,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
             inside_mismatch_windows=dict(
                 one_step=error_table(spec, models, W1, fold1, floor, inside1),
                 rollout=error_table(spec, models, WH, foldH, floor, insideH)))
+    bar.close()
     return dict(spec=spec, base=base, sigma=sigma, floor=floor, windows=windows, steps=steps,
                 W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
