@@ -29,7 +29,8 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.fit import Problem, select
+from adaptive_c3.tools.diagnosis.evidence import evidence_windows, verdict, window_phases
+from adaptive_c3.tools.diagnosis.fit import MIN_REDUCTION, Problem, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
                                                make_windows, prediction_floor)
 from adaptive_c3.tools.recording import RecordingError, load_recording
@@ -193,8 +194,6 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     W1, WH = make_windows(rec, 1), make_windows(rec, horizon)
     sigma = estimate_noise(P0, W1)
     floor = prediction_floor(P0, sigma, horizon)
-    windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
-    bar.update(2)
     foldH, split_note = fold_ids(rec, WH)
     fold1, _ = fold_ids(rec, W1)
     stride = int(getattr(spec, "window_stride", 1))    # costly models: fewer fit windows
@@ -202,7 +201,18 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
+    nuisance = fit_nuisance(prob)          # e.g. a sensor delay: part of the base model
+    base = list(prob.base)
+    P0 = patch(spec, base)
+    windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
+    bar.update(2)
     chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs, offset=2)
+    judged = verdict(fits, chosen, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION))
+    if chosen is not None:
+        Wu = prob.used()
+        judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
+                                              none_eval[3] - chosen.test_window_ssr,
+                                              chosen.cands[0].name)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P0 for k in prob.folds}
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
@@ -221,7 +231,8 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                 W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
                 P0=P0, P1=P1, P1_folds=after, errors=errors,
-                contact=contact_summary(spec, steps), horizon=horizon,
+                contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
+                nuisance=nuisance,
                 seconds=time.perf_counter() - start)
 
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from adaptive_c3.systems.contact.lcp import solve_lcp
-from adaptive_c3.tools.diagnosis.effects import SystemSpec
+from adaptive_c3.tools.diagnosis.effects import SystemSpec, delayed_inputs
 
 G = 9.81
 DIAG_DT = 0.01            # the step the recording must be sampled at, s
@@ -133,7 +133,11 @@ class BallSpec(SystemSpec):
     # offsets: a fine grid of mm (a coarse one lands beyond contact, where the error is
     # flat and the fit cannot come back)
     grids: dict = field(default_factory=lambda: {
-        "contact_offset": np.linspace(-0.012, 0.012, 13)})
+        "contact_offset": np.linspace(-0.012, 0.012, 13),
+        "actuator_delay": np.linspace(0.0, 0.02, 5)})
+    # fitted first and kept in the base model when the held-out data support it (the
+    # recorded states of another engine / a real robot may lag the recorded inputs)
+    nuisance: tuple = (("actuator_delay", ""),)
     cache: dict = field(default_factory=dict)
 
     def prepare(self, rec) -> None:
@@ -186,6 +190,7 @@ class BallPatched:
     viscous: float            # N*s/m on the ball's linear velocity
     rolling: float            # m (torque = rolling * m g)
     ball_mass: float
+    delay_steps: float = 0.0  # the inputs act this many steps after their record
     A: np.ndarray = None      # a representative full A (noise-floor propagation)
     Jc: np.ndarray = None     # [T, 8, 9]
     F: np.ndarray = None      # [T, 8, 8]
@@ -243,7 +248,7 @@ class BallPatched:
         X[:, POS] = self.spec.cache["psmooth"][rows]     # the smoothed start positions
         xs, lams = [], []
         for h in range(horizon):
-            X, lam, S = self.step(X, U[:, lag + h], rows + h, S)
+            X, lam, S = self.step(X, delayed_inputs(U, lag, self.delay_steps, h), rows + h, S)
             xs.append(X)
             lams.append(lam)
         return np.stack(xs, 1), np.stack(lams, 1)
@@ -262,7 +267,7 @@ class BallPatched:
         """(model contact [W, m], data contact [W, m], inferred lam) - see locate.py."""
         from scipy.optimize import nnls
         idx = np.asarray(W1.row)
-        u = W1.U[:, lag]
+        u = delayed_inputs(W1.U, lag, self.delay_steps, 0)
         X0 = np.array(W1.X0, float)
         X0[:, POS] = self.spec.cache["psmooth"][idx]
         _, lam_model, _ = self.step(X0, u, idx)
@@ -293,7 +298,7 @@ def ball_patch(spec: BallSpec, effects) -> BallPatched:
     delta = np.zeros(2)
     minv = spec.cache["Minv"].copy()
     tau = np.zeros(9)
-    viscous = rolling = 0.0
+    viscous = rolling = delay = 0.0
     mass = spec.params.ball_mass
     pairs = list(spec.pair_names)
     for cand, p in effects:
@@ -313,9 +318,11 @@ def ball_patch(spec: BallSpec, effects) -> BallPatched:
             viscous += v[0]
         elif name == "rolling_resistance":
             rolling += v[0]
+        elif name == "actuator_delay":
+            delay += v[0] / spec.dt
         else:
             raise ValueError(f"effect {name} is not modelled for ball rolling")
-    return BallPatched(spec, mu, delta, minv, tau, viscous, rolling, mass)
+    return BallPatched(spec, mu, delta, minv, tau, viscous, rolling, mass, delay)
 
 
 @dataclass
@@ -360,7 +367,8 @@ def ball_spec(scenario) -> BallSpec:
             "coulomb_friction": "no sliding joint in the model; the ball's losses are "
                                 "rolling_resistance / viscous_damping",
             "actuator_gain": "the recording holds the applied EE force; " + why_not,
-            "actuator_delay": "the recording holds the applied EE force; " + why_not},
+            "actuator_delay": "fitted before the candidates as a nuisance: the recorded "
+                              "states lag the inputs (a sensor or logging delay)"},
         params=p, eps_c=m.eps_c, num_edges=m.friction_edges,
         effect_targets={"viscous_damping": ("ball",), "external_force": ("ball_x", "ball_y")},
         fit_weight=weight, plot_idx=(7, 8, 9, 16, 17, 18, 13, 14, 0, 2))

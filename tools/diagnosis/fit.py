@@ -107,6 +107,7 @@ class Fit:
     test_ssr: float = np.nan   # cross-validated
     test_n: int = 0
     test_cluster_ssr: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    test_window_ssr: np.ndarray = field(default_factory=lambda: np.zeros(0))
     score: float = np.nan
     z_vs_none: float = 0.0
     reduction: float = 0.0
@@ -304,18 +305,22 @@ def _sandwich_sd(Jt, r, cl, W: Windows) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
-def evaluate(prob: Problem, fit: Fit | None) -> tuple[float, int, np.ndarray]:
-    """Cross-validated SSR, residual count and per-cluster SSR (None = unmodified)."""
+def evaluate(prob: Problem, fit: Fit | None):
+    """Cross-validated SSR, residual count, per-cluster SSR and per-window SSR [W used, in
+    prob.used() order] (fit None = the unmodified model)."""
     ssr, n, per_c = 0.0, 0, []
+    used_fold = prob.fold[prob.fold >= 0]
+    per_window = np.zeros(len(used_fold))
     for k in prob.folds:
         W = prob.test(k)
         effects = [] if fit is None else fit.fold_effects(prob.spec, k)
         r = prob.residuals(effects, W)
         per_w = np.sum(r.reshape(len(W), -1) ** 2, 1)
+        per_window[used_fold == k] = per_w
         ssr += float(per_w.sum())
         n += r.size
         per_c.append(np.bincount(prob.clusters(W), weights=per_w))
-    return ssr, n, np.concatenate(per_c) if per_c else np.zeros(0)
+    return ssr, n, np.concatenate(per_c) if per_c else np.zeros(0), per_window
 
 
 def _score(ssr, n, p, horizon):
@@ -333,8 +338,8 @@ def paired_z(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
-    ssr0, n, per0 = none_eval
-    fit.test_ssr, fit.test_n, fit.test_cluster_ssr = evaluate(prob, fit)
+    ssr0, n, per0, _ = none_eval
+    fit.test_ssr, fit.test_n, fit.test_cluster_ssr, fit.test_window_ssr = evaluate(prob, fit)
     fit.score = _score(fit.test_ssr, n, fit.num_params, prob.horizon)
     fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
     fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
@@ -354,6 +359,18 @@ def _choose(fits, equal_rel: float = 0.0):
     equal = [f for f in sig if f.score < best.score + SCORE_MARGIN
              or f.test_ssr <= best.test_ssr * (1.0 + equal_rel)]
     return min(equal, key=lambda f: (not f.physical, f.num_params, f.score))
+
+
+def fit_nuisance(prob: Problem) -> list:
+    """Fits of the spec's nuisance effects (spec.nuisance: [(name, target)]) that the
+    held-out data support, each then kept in prob.base for everything that follows."""
+    kept = []
+    for name, target in getattr(prob.spec, "nuisance", ()):
+        f = score_fit(prob, cv_fit(prob, [Candidate(name, target)]), evaluate(prob, None))
+        if f.significant:
+            prob.base = list(prob.base) + f.effects(prob.spec)
+            kept.append(f)
+    return kept
 
 
 def select(prob: Problem, cands, progress=None, pairs: bool = True, offset: int = 0):
