@@ -342,11 +342,11 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
 
 def concealed_draw(seed: int, name=None, target=None, vary: bool = True, **kw):
     """(Recording, Truth, clean states) for a seed; the truth stays with the harness.
-    vary: add the second-engine variation of draw_variation(seed)."""
+    vary: add the second-engine variation of draw_variation(seed) (or pass variation=)."""
     rng = np.random.default_rng([seed, 11])
     truth = draw_effect(rng, name, target)
-    rec, clean = make_recording(truth, seed=int(rng.integers(2**31)),
-                                variation=draw_variation(seed, vary), **kw)
+    variation = kw.pop("variation", None) or draw_variation(seed, vary)
+    rec, clean = make_recording(truth, seed=int(rng.integers(2**31)), variation=variation, **kw)
     return rec, truth, clean
 
 
@@ -375,6 +375,7 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> dict:
     """Draw, diagnose (and run the SINDy baseline), score against the concealed truth."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.ball_hit_rate import judged_fields
     from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
     from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
@@ -387,7 +388,8 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> di
     eff = Truth(truth.name, truth.target, effective_truth_value(truth, var), truth.unit)
     row = score_diagnosis(seed, rec, eff, clean, spec, result, baseline,
                           error_cut=clean_error_cut)
-    row.update(variation=var.as_dict(), drawn_value=truth.value)
+    row.update(variation=var.as_dict(), drawn_value=truth.value, **judged_fields(result, eff))
+    row["favoured"] = bool(row["named"] and row["verdict"] != "ambiguous")
     return row
 
 

@@ -29,7 +29,8 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.evidence import evidence_windows, verdict, window_phases
+from adaptive_c3.tools.diagnosis.evidence import (evidence_windows, free_ball_verdict,
+                                                 widen_for_phases, window_phases)
 from adaptive_c3.tools.diagnosis.fit import MIN_REDUCTION, Problem, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
                                                make_windows, prediction_floor)
@@ -207,11 +208,13 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
     bar.update(2)
     chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs, offset=2)
-    judged = verdict(fits, chosen, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION))
+    chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
+        prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION))
     if chosen is not None:
-        Wu = prob.used()
+        widen_for_phases(scored, chosen)
+        Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
-                                              none_eval[3] - chosen.test_window_ssr,
+                                              none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P0 for k in prob.folds}
@@ -232,7 +235,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
                 P0=P0, P1=P1, P1_folds=after, errors=errors,
                 contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
-                nuisance=nuisance,
+                nuisance=nuisance, fits_free=fits_free,
                 seconds=time.perf_counter() - start)
 
 

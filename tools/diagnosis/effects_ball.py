@@ -138,6 +138,9 @@ class BallSpec(SystemSpec):
     # fitted first and kept in the base model when the held-out data support it (the
     # recorded states of another engine / a real robot may lag the recorded inputs)
     nuisance: tuple = (("actuator_delay", ""),)
+    # rolling resistance, drag and a constant force are also fitted and judged on the
+    # windows where the ball rolls or rests without the EE (tools/diagnosis/evidence.py)
+    free_ball: bool = True
     cache: dict = field(default_factory=dict)
 
     def prepare(self, rec) -> None:

@@ -59,6 +59,8 @@ class Problem:
     fold: np.ndarray           # [W] fold id (0..K-1), -1 = not used
     weight: np.ndarray         # [H, n] = 1 / prediction floor
     cluster_steps: int = 50
+    min_reduction: float | None = None   # significance: held-out SSR cut (None: the spec's)
+    min_z: float = -np.inf               # ... and paired z against the unmodified model
 
     @property
     def horizon(self) -> int:
@@ -82,7 +84,7 @@ class Problem:
         W = self.windows
         cut = Windows(W.X0, W.Xt[:, :horizon], W.U[:, :LAG + horizon], W.row, W.episode, W.t0)
         return Problem(self.spec, self.base, cut, self.fold, self.weight[:horizon],
-                       self.cluster_steps)
+                       self.cluster_steps, self.min_reduction, self.min_z)
 
     def residuals(self, effects, W: Windows) -> np.ndarray:
         """[W, H, n] normalised rollout residuals of the model with `effects` added."""
@@ -343,9 +345,11 @@ def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
     fit.score = _score(fit.test_ssr, n, fit.num_params, prob.horizon)
     fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
     fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
-    min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
+    min_red = prob.min_reduction
+    if min_red is None:
+        min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
     fit.significant = bool(fit.score < _score(ssr0, n, 0, prob.horizon) - SCORE_MARGIN
-                           and fit.reduction >= min_red)
+                           and fit.reduction >= min_red and fit.z_vs_none >= prob.min_z)
     return fit
 
 

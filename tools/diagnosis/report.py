@@ -28,10 +28,10 @@ def _params(fit, spec):
     return out
 
 
-def candidate_rows(result) -> list:
+def candidate_rows(result, key: str = "fits") -> list:
     spec = result["spec"]
     rows = []
-    for f in sorted(result["fits"], key=lambda f: f.score):
+    for f in sorted(result.get(key) or [], key=lambda f: f.score):
         effects = _params(f, spec)
         row = dict(name=" + ".join(e["name"] for e in effects),
                    target=" + ".join(e["target"] for e in effects),
@@ -292,6 +292,7 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
         mismatch_windows_total=int(result["steps"]["total_windows"]),
         contact_agreement=result["contact"],
         candidates=candidate_rows(result),
+        free_window_candidates=candidate_rows(result, "fits_free"),
         not_applicable=[dict(name=k, reason=v) for k, v in result["not_applicable"].items()],
         selected=selected, **_judged(result),
         error_before=result["errors"]["before"], error_after=result["errors"]["after"],
