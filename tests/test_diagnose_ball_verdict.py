@@ -3,6 +3,7 @@ the separating excitation) or `none`; a sensor delay is fitted first as a nuisan
 evidence windows are labelled by phase. The >= 40-draw per-effect hit rate is slow."""
 import json
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -95,13 +96,27 @@ def test_delayed_force_named_with_its_evidence(delayed_force_report):
     assert {w["phase"] for w in ev["windows"]} <= {"coast", "rest"}
 
 
+# ------------------------------------------------------------------ the hit rate
+@pytest.mark.parametrize("seed,name,target", [(34, "rolling_resistance", "ball_table"),
+                                              (35, "none", "")])
+def test_hit_rate_fast(seed, name, target):
+    """Two varied draws scored as the slow run scores them: the truth named first, or
+    (ambiguous verdict) inside the ambiguous set; the summary counts them."""
+    from adaptive_c3.tools.diagnosis.ball_hit_rate import summarise
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    row = score_draw(seed, baseline=False, pairs=False, name=name, target=target)
+    assert row["named"] or row["in_ambiguous_set"], row
+    label = f"{name}[{target}]" if target else name
+    assert summarise([row])["per_effect"][label]["draws"] == 1
+
+
 # ------------------------------------------------------------------ the hit rate (slow)
 @pytest.mark.slow
 def test_ball_per_effect_hit_rate_slow(tmp_path):
     """>= 40 concealed draws with the second-engine variation; writes JSON + a figure."""
     from adaptive_c3.tools.diagnosis.ball_hit_rate import run
     out = os.environ.get("ADAPTIVE_C3_BALL_HIT_RATE_DIR") or str(tmp_path)
-    s = run(40, 7000, __import__("pathlib").Path(out))
+    s = run(40, 8000, Path(out))
     print(json.dumps(s, indent=1))
     assert s["draws"] >= 40
     # measured bars (not the issue's targets, which are not reached: see README)
@@ -109,5 +124,5 @@ def test_ball_per_effect_hit_rate_slow(tmp_path):
     assert s["truth_in_ambiguous"] is None or s["truth_in_ambiguous"] >= SLOW_IN_AMBIGUOUS, s
 
 
-SLOW_NAMED = 0.5
-SLOW_IN_AMBIGUOUS = 0.5
+SLOW_NAMED = 0.5          # measured 0.55 (22/40), seeds 8000-8039
+SLOW_IN_AMBIGUOUS = 0.7   # measured 0.73 (11/15 ambiguous draws)

@@ -20,26 +20,10 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_c3.tools.diagnosis.concealed_ball_data import label as _label, score_draw
+
 TARGETS = dict(named=0.90, none_on_clean=1.0, coverage=0.85, truth_in_ambiguous=1.0,
                median_excess_cut=5.0)
-
-
-def _label(name, target) -> str:
-    return f"{name}[{target}]" if target else name
-
-
-def judged_fields(result, truth) -> dict:
-    """Verdict, ambiguous set and whether the truth is in it; noisy excess-over-noise."""
-    j = result.get("judged") or {}
-    amb = [_label(a["name"], a["target"]) for a in j.get("ambiguous", [])]
-    t = _label(truth.name, truth.target)
-    eb = result["errors"]["before"]["rollout"]["excess_over_noise"]
-    ea = result["errors"]["after"]["rollout"]["excess_over_noise"]
-    return dict(verdict=j.get("verdict", "named"), ambiguous=amb,
-                in_ambiguous_set=(t in amb) if amb else None,
-                excess_before=eb, excess_after=ea, excess_cut=eb / max(ea, 1e-9),
-                nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
-                          for f in result.get("nuisance", [])])
 
 
 def summarise(rows) -> dict:
@@ -95,7 +79,6 @@ def plot(summary, path: Path) -> None:
 
 
 def run(draws: int, first_seed: int, out: Path, **kw) -> dict:
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for s in range(first_seed, first_seed + draws):

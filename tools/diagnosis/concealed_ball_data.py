@@ -372,10 +372,27 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def label(name, target) -> str:
+    return f"{name}[{target}]" if target else name
+
+
+def judged_fields(result, truth) -> dict:
+    """Verdict, ambiguous set and whether the truth is in it; noisy excess-over-noise."""
+    j = result.get("judged") or {}
+    amb = [label(a["name"], a["target"]) for a in j.get("ambiguous", [])]
+    t = label(truth.name, truth.target)
+    eb = result["errors"]["before"]["rollout"]["excess_over_noise"]
+    ea = result["errors"]["after"]["rollout"]["excess_over_noise"]
+    return dict(verdict=j.get("verdict", "named"), ambiguous=amb,
+                in_ambiguous_set=(t in amb) if amb else None,
+                excess_before=eb, excess_after=ea, excess_cut=eb / max(ea, 1e-9),
+                nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
+                          for f in result.get("nuisance", [])])
+
+
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> dict:
     """Draw, diagnose (and run the SINDy baseline), score against the concealed truth."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.ball_hit_rate import judged_fields
     from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
     from adaptive_c3.tools.diagnosis.effects_ball import ball_spec

@@ -10,6 +10,12 @@ linearised at every recording sample, tools/diagnosis/effects_ball.py; the recor
 must be sampled at 100 Hz). rigid_object scenarios (free bodies tossed onto a table, many
 episodes, full open-loop rollouts) are diagnosed by tools/diagnosis/rigid_diagnose.py.
 
+Ball rolling, besides (tools/diagnosis/evidence.py): a sensor delay is fitted first and
+kept in the model (report `nuisance`); rolling resistance, drag and a constant force are
+also fitted and judged on the windows where the ball rolls or rests without the EE; the
+report says `verdict` named | ambiguous | none, lists the `ambiguous` set with held-out
+scores and the `separating_excitation`, and which windows carried the `evidence`.
+
 Patched scenarios: where an effect maps onto a scenario key it sets the key
 (contact_offset -> model.wall_offset_error, contact_stiffness -> model.wall_stiffness;
 ball rolling: contact_offset[ee_ball] -> model.ee_radius, mass_scale -> model.ball_mass);

@@ -20,7 +20,9 @@ when no effect is applied (checked in tests). Effects: contact_offset (delta per
 m; c += delta / dt), r_comp (delta on both pairs), friction_coefficient (mu per pair),
 mass_scale (the ball's block of M^-1), external_force (a constant force on the ball,
 N), viscous_damping (-b v on the ball), rolling_resistance (a torque coef * m g
-opposing the ball's spin about horizontal axes, saturated below OMEGA0). The LCPs (m =
+opposing the ball's spin about horizontal axes, saturated below OMEGA0), actuator_delay
+(the recorded inputs act that many s later: how a sensor delay looks; fitted first as a
+nuisance, see `diagnose`). The LCPs (m =
 8, F positive definite) are solved batched by block principal pivoting, warm-started
 from the previous step's active set, with Lemke as the fallback.
 """

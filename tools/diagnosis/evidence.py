@@ -208,7 +208,8 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     windows only (their own evidence, away from the model's contact artifacts). A
     free-ball effect significant there replaces a global choice that is none, itself
     a free-ball effect, or not consistent across clusters; a replaced push-phase choice
-    joins the ambiguous set."""
+    joins the ambiguous set. A consistent push-phase choice stays, with the free-window
+    effect added to its ambiguous set (each explains different windows)."""
     from adaptive_c3.tools.diagnosis.fit import select
     judged = verdict(fits, chosen, none_eval, min_reduction)
     sub = free_ball_problem(prob) if getattr(prob.spec, "free_ball", False) else None
@@ -217,21 +218,29 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     free_c = [c for c in cands if c.name in FREE_EFFECTS]
     chosen_f, fits_f, none_f = select(sub, free_c, pairs=False)
     global_free = chosen is not None and chosen.cands[0].name in FREE_EFFECTS
-    if chosen_f is None or not (chosen is None or global_free
-                                or chosen.z_vs_none < Z_AMBIG):
+    if chosen_f is None:
+        return chosen, judged, fits_f, (prob, none_eval)
+    row_g = None if chosen is None else dict(fit_row(chosen, none_eval), note="all windows")
+    row_f = dict(fit_row(chosen_f, none_f), note="free windows")
+    if not (chosen is None or global_free or chosen.z_vs_none < Z_AMBIG):
+        _join(judged, row_g, row_f)
         return chosen, judged, fits_f, (prob, none_eval)
     judged_f = verdict(fits_f, chosen_f, none_f, min_reduction)
     judged_f["free_windows"] = int(np.sum(sub.fold >= 0))
     if chosen is not None and not global_free:       # a push-phase rival stays in the set
-        rival = fit_row(chosen, none_eval)
-        if not judged_f["ambiguous"]:
-            judged_f["ambiguous"] = [fit_row(chosen_f, none_f)]
-        judged_f["ambiguous"].append(dict(rival, note="scored on all windows"))
-        judged_f["separating_excitation"].append(dict(
-            between=[chosen_f.cands[0].name, rival["name"]],
-            change=MORE_EVIDENCE.get(rival["name"], DEFAULT_SEPARATION)))
-        judged_f["verdict"] = "ambiguous"
+        _join(judged_f, row_f, row_g)
     return chosen_f, judged_f, fits_f, (sub, none_f)
+
+
+def _join(judged, first: dict, other: dict) -> None:
+    """Make the verdict ambiguous between `first` (kept first) and `other`."""
+    if not judged["ambiguous"]:
+        judged["ambiguous"] = [first]
+    judged["ambiguous"].append(other)
+    judged["separating_excitation"].append(dict(
+        between=[first["name"], other["name"]],
+        change=MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)))
+    judged["verdict"] = "ambiguous"
 
 
 def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
