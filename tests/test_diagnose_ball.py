@@ -160,10 +160,12 @@ HIT_RATE_THRESHOLD = 0.7
 
 @pytest.fixture(scope="module")
 def ball_hit_rate(tmp_path_factory):
-    """>= 30 random draws (seeds 5000..) + clean draws, scored once for the module."""
+    """>= 30 random draws (seeds 5000..) + clean draws, scored once for the module.
+    The original single-engine harness (vary=False); the varied one is in
+    test_diagnose_ball_verdict.py."""
     from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
     from adaptive_c3.tools.diagnosis.concealed_data import hit_rates
-    rows = [score_draw(s) for s in range(5000, 5032)]
+    rows = [score_draw(s, vary=False) for s in range(5000, 5032)]
     summary = hit_rates(rows)
     out = (os.environ.get("ADAPTIVE_C3_BALL_HIT_RATE_JSON")
            or str(tmp_path_factory.mktemp("hit_rate") / "hit_rate.json"))

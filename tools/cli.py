@@ -22,6 +22,7 @@ BENCH_SUITES = {   # suite -> module exposing run_bench(quick) -> list of rows
     "loop": "adaptive_c3.tools.bench.loop",
     "sweep": "adaptive_c3.tools.bench.sweep",
     "bridge": "adaptive_c3.tools.bench.bridge",
+    "diagnose": "adaptive_c3.tools.bench.diagnose",
 }
 
 

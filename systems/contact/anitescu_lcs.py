@@ -244,6 +244,14 @@ class AnitescuLinearizer:
             normals[i] = n
         return phi, J_n, J_t, normals
 
+    def geometry_terms(self, x):
+        """(φ, J_n, J_t, normals, N, N⁺) at x: contact geometry and the q̇ ↔ v maps
+        (no dynamics; for callers that take the smooth part once)."""
+        phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
+        N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
+        N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
+        return phi, J_n, J_t, normals, N, N_plus
+
     # ------------------------------------------------------------------ LCS
     def linearize(self, x_star, u_star, dt: float | None = None) -> Lcs:
         """θ* at (x*, u*) as an Lcs (dt defaults to the linearizer's dt)."""
@@ -255,11 +263,7 @@ class AnitescuLinearizer:
         and input (planning, loop period, learner) cost one evaluation."""
         key = x.tobytes() + u.tobytes()
         if self._point[0] != key:
-            f, J_f, M, M_inv = self.smooth_dynamics(x, u)
-            phi, J_n, J_t, normals = self.contact_geometry(x)  # also sets the double context
-            N = self.plant.MakeVelocityToQDotMap(self._plant_context).toarray()
-            N_plus = self.plant.MakeQDotToVelocityMap(self._plant_context).toarray()
-            terms = (f, J_f, M, M_inv, phi, J_n, J_t, normals, N, N_plus)
+            terms = (*self.smooth_dynamics(x, u), *self.geometry_terms(x))
             for a in terms:           # shared by every LCS built at this point
                 a.setflags(write=False)
             self._point = (key, terms)

@@ -17,6 +17,13 @@ size from a seed the diagnosis never sees:
   viscous_damping[ball]         a force -b v on the ball (N*s/m)
   none
 
+Second-engine variation (every draw, `vary=True`, from its own random stream so the
+effect draw is unchanged): what real data has and a single simulator hides - contact
+point stiffness log-uniform 2e4-3e5 N/m and SAP relaxation time 0.5-5 ms (the model is
+rigid and undamped), a sensor delay of 0-8 ms (the recorded state lags the applied
+force: linear interpolation between samples), and a table height off by +-0.3 mm (for
+a contact_offset[ball_table] draw the effective truth is value - table_dz).
+
 Excitation: a 100 Hz controller (zero-order-held EE forces, PD on a moving EE target
 with gravity compensation, computed from the noisy measured state) repeats pushes of the
 ball in random directions, as the reference gait does: the EE lifts over the ball,
@@ -37,6 +44,7 @@ applied EE force, at 100 Hz, several episodes. The truth is returned, never reco
 """
 from __future__ import annotations
 
+from dataclasses import asdict, dataclass
 
 import numpy as np
 
@@ -79,11 +87,40 @@ def draw_effect(rng, name=None, target=None) -> Truth:
     return Truth(name, target or "", float(value), UNITS[name])
 
 
+@dataclass(frozen=True)
+class Variation:
+    """How the recording's engine differs from the model besides the concealed effect."""
+    stiffness: float = 1e5          # N/m, point contact stiffness
+    relaxation_time: float = 2e-3   # s, SAP dissipation
+    sensor_delay: float = 0.0       # s, the recorded state lags by this
+    table_dz: float = 0.0           # m, table top height error
+
+    def as_dict(self):
+        return asdict(self)
+
+
+def draw_variation(seed: int, vary: bool = True) -> Variation:
+    if not vary:
+        return Variation()
+    rng = np.random.default_rng([seed, 13])
+    return Variation(stiffness=float(np.exp(rng.uniform(np.log(2e4), np.log(3e5)))),
+                     relaxation_time=float(rng.uniform(5e-4, 5e-3)),
+                     sensor_delay=float(rng.uniform(0.0, 0.008)),
+                     table_dz=float(rng.uniform(-3e-4, 3e-4)))
+
+
+def effective_truth_value(truth: Truth, var: Variation) -> float:
+    """The value the diagnosis should find: a table-height draw adds to the table error."""
+    if truth.name == "contact_offset" and truth.target == "ball_table":
+        return truth.value - var.table_dz
+    return truth.value
+
+
 # ------------------------------------------------------------------ the true plant
 class TruePlant:
     """EE + ball + table in Drake (SAP, point contact, 1 kHz) with the concealed effect."""
 
-    def __init__(self, p: ModelParams, truth: Truth):
+    def __init__(self, p: ModelParams, truth: Truth, var: Variation = Variation()):
         from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, Sphere
         from pydrake.math import RigidTransform
         from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction,
@@ -93,12 +130,12 @@ class TruePlant:
         from pydrake.systems.framework import DiagramBuilder
         self.truth, self.p = truth, p
         t = truth
-        ee_r, ball_m, table_z = p.ee_radius, p.ball_mass, 0.0
+        ee_r, ball_m, table_z = p.ee_radius, p.ball_mass, var.table_dz
         mu = {"ee": p.mu, "ball": p.mu, "table": p.mu}
         if t.name == "contact_offset" and t.target == "ee_ball":
             ee_r = p.ee_radius - t.value          # gap larger by value
         if t.name == "contact_offset" and t.target == "ball_table":
-            table_z = -t.value                     # model sees the ball `value` too high
+            table_z -= t.value                     # model sees the ball `value` too high
         if t.name == "mass_scale":
             ball_m = p.ball_mass * t.value
         if t.name == "friction_coefficient":       # Drake combines 2ab/(a+b); ball stays mu
@@ -112,8 +149,8 @@ class TruePlant:
 
         def props(m):
             pr = ProximityProperties()
-            AddContactMaterial(pr, point_stiffness=1e5, friction=CoulombFriction(m, m))
-            pr.AddProperty("material", "relaxation_time", 2e-3)
+            AddContactMaterial(pr, point_stiffness=var.stiffness, friction=CoulombFriction(m, m))
+            pr.AddProperty("material", "relaxation_time", var.relaxation_time)
             return pr
         inst = plant.AddModelInstance("ee")
         lx = plant.AddRigidBody("ee_x_link", inst, SpatialInertia.Zero())
@@ -253,8 +290,9 @@ def _random_quat(rng):
 
 def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: float = 1.6,
                    params: ModelParams | None = None, noise_scale: float | None = None,
-                   scenario_text: str | None = None):
-    """(Recording, clean states [T, 19]) of the true plant under the pushing excitation."""
+                   scenario_text: str | None = None, variation: Variation = Variation()):
+    """(Recording, clean states [T, 19]) of the true plant under the pushing excitation;
+    the recorded (and controlled-on) state lags by variation.sensor_delay."""
     from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
     from adaptive_c3.scenarios.schema import SCENARIO_DIR
     from adaptive_c3.tools.recording import Recording
@@ -263,7 +301,8 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
     if noise_scale is None:
         noise_scale = rng.uniform(0.7, 1.3)
     sigma = NOISE_STD * noise_scale
-    plant = TruePlant(p, truth)
+    plant = TruePlant(p, truth, variation)
+    lag = variation.sensor_delay / DT          # fraction of a step, < 1
     steps = int(round(duration_s / DT))
     kp, kd = (2 * np.pi * 4.0) ** 2, 2 * 0.8 * 2 * np.pi * 4.0
     ts, xs, us, eps, clean = [], [], [], [], []
@@ -276,10 +315,11 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
         x[0:3] = ball + np.array([0, 0, 2 * p.ball_radius + p.ee_radius + 0.04])
         x[0:2] += rng.uniform(-0.05, 0.05, 2)
         plant.reset(x[:10].tolist() + [0.0] * 9)
-        x = plant.state()
+        x = x_prev = plant.state()
         pusher = Pusher(rng, p, center)
         for k in range(steps):
-            y = x + sigma * rng.standard_normal(19)
+            seen = (1 - lag) * x + lag * x_prev
+            y = seen + sigma * rng.standard_normal(19)
             pref, vref = pusher.target(k * DT, y[0:3], y[7:10], y[16:19])
             u = p.ee_mass * (kp * (pref - y[0:3]) + kd * (vref - y[10:13]))
             u[2] += p.ee_mass * G
@@ -288,8 +328,8 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
             xs.append(y)
             us.append(u)
             eps.append(e)
-            clean.append(x)
-            x = plant.step(u)
+            clean.append(seen)
+            x_prev, x = x, plant.step(u)
             if abs(x[7] - 0.55) > 0.8 or abs(x[8]) > 0.8 or not np.all(np.isfinite(x)):
                 break
     if scenario_text is None:
@@ -300,11 +340,13 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
     return rec, np.array(clean)
 
 
-def concealed_draw(seed: int, name=None, target=None, **kw):
-    """(Recording, Truth, clean states) for a seed; the truth stays with the harness."""
+def concealed_draw(seed: int, name=None, target=None, vary: bool = True, **kw):
+    """(Recording, Truth, clean states) for a seed; the truth stays with the harness.
+    vary: add the second-engine variation of draw_variation(seed) (or pass variation=)."""
     rng = np.random.default_rng([seed, 11])
     truth = draw_effect(rng, name, target)
-    rec, clean = make_recording(truth, seed=int(rng.integers(2**31)), **kw)
+    variation = kw.pop("variation", None) or draw_variation(seed, vary)
+    rec, clean = make_recording(truth, seed=int(rng.integers(2**31)), variation=variation, **kw)
     return rec, truth, clean
 
 
@@ -330,6 +372,24 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
     return out[0], out[1]
 
 
+def label(name, target) -> str:
+    return f"{name}[{target}]" if target else name
+
+
+def judged_fields(result, truth) -> dict:
+    """Verdict, ambiguous set and whether the truth is in it; noisy excess-over-noise."""
+    j = result.get("judged") or {}
+    amb = [label(a["name"], a["target"]) for a in j.get("ambiguous", [])]
+    t = label(truth.name, truth.target)
+    eb = result["errors"]["before"]["rollout"]["excess_over_noise"]
+    ea = result["errors"]["after"]["rollout"]["excess_over_noise"]
+    return dict(verdict=j.get("verdict", "named"), ambiguous=amb,
+                in_ambiguous_set=(t in amb) if amb else None,
+                excess_before=eb, excess_after=ea, excess_cut=eb / max(ea, 1e-9),
+                nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
+                          for f in result.get("nuisance", [])])
+
+
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> dict:
     """Draw, diagnose (and run the SINDy baseline), score against the concealed truth."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
@@ -339,10 +399,15 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> di
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     kw.setdefault("params", ModelParams.from_scenario(scenario))
     rec, truth, clean = concealed_draw(seed, **kw)
+    var = draw_variation(seed, kw.get("vary", True))
     spec = ball_spec(scenario)
     result = diagnose(rec, spec, progress=False, pairs=pairs)
-    return score_diagnosis(seed, rec, truth, clean, spec, result, baseline,
-                           error_cut=clean_error_cut)
+    eff = Truth(truth.name, truth.target, effective_truth_value(truth, var), truth.unit)
+    row = score_diagnosis(seed, rec, eff, clean, spec, result, baseline,
+                          error_cut=clean_error_cut)
+    row.update(variation=var.as_dict(), drawn_value=truth.value, **judged_fields(result, eff))
+    row["favoured"] = bool(row["named"] and row["verdict"] != "ambiguous")
+    return row
 
 
 def main(argv=None) -> int:

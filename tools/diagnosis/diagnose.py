@@ -10,6 +10,12 @@ linearised at every recording sample, tools/diagnosis/effects_ball.py; the recor
 must be sampled at 100 Hz). rigid_object scenarios (free bodies tossed onto a table, many
 episodes, full open-loop rollouts) are diagnosed by tools/diagnosis/rigid_diagnose.py.
 
+Ball rolling, besides (tools/diagnosis/evidence.py): a sensor delay is fitted first and
+kept in the model (report `nuisance`); rolling resistance, drag and a constant force are
+also fitted and judged on the windows where the ball rolls or rests without the EE; the
+report says `verdict` named | ambiguous | none, lists the `ambiguous` set with held-out
+scores and the `separating_excitation`, and which windows carried the `evidence`.
+
 Patched scenarios: where an effect maps onto a scenario key it sets the key
 (contact_offset -> model.wall_offset_error, contact_stiffness -> model.wall_stiffness;
 ball rolling: contact_offset[ee_ball] -> model.ee_radius, mass_scale -> model.ball_mass);
@@ -29,7 +35,9 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.fit import Problem, select
+from adaptive_c3.tools.diagnosis.evidence import (evidence_windows, free_ball_verdict,
+                                                 widen_for_phases, window_phases)
+from adaptive_c3.tools.diagnosis.fit import MIN_REDUCTION, Problem, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
                                                make_windows, prediction_floor)
 from adaptive_c3.tools.recording import RecordingError, load_recording
@@ -181,13 +189,18 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     from adaptive_c3.tools.progress import Progress
     start = time.perf_counter()
     base = list(base)
+    cands, not_applicable = applicable_candidates(spec)
+    # stages: linearise + locate (2), one per candidate fit and pair, the error tables (1)
+    n_pair = getattr(spec, "pair_singles", 4)
+    bar = Progress(len(cands) + (n_pair * (n_pair - 1) // 2 if pairs else 0) + 3,
+                   "diagnose", unit="stages", enabled=progress)
     if hasattr(spec, "prepare"):          # time-varying models linearise along the recording
         spec.prepare(rec)
+    bar.update(1)
     P0 = patch(spec, base)
     W1, WH = make_windows(rec, 1), make_windows(rec, horizon)
     sigma = estimate_noise(P0, W1)
     floor = prediction_floor(P0, sigma, horizon)
-    windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
     foldH, split_note = fold_ids(rec, WH)
     fold1, _ = fold_ids(rec, W1)
     stride = int(getattr(spec, "window_stride", 1))    # costly models: fewer fit windows
@@ -195,11 +208,20 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
-    cands, not_applicable = applicable_candidates(spec)
-    bar = Progress(len(cands) + (6 if pairs else 0), "diagnose: fitting effects", unit="fits",
-                   enabled=progress)
-    chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs)
-    bar.close()
+    nuisance = fit_nuisance(prob)          # e.g. a sensor delay: part of the base model
+    base = list(prob.base)
+    P0 = patch(spec, base)
+    windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
+    bar.update(2)
+    chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs, offset=2)
+    chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
+        prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION))
+    if chosen is not None:
+        widen_for_phases(scored, chosen)
+        Wu = scored.used()
+        judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
+                                              none_scored[3] - chosen.test_window_ssr,
+                                              chosen.cands[0].name)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P0 for k in prob.folds}
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
@@ -213,11 +235,13 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
             inside_mismatch_windows=dict(
                 one_step=error_table(spec, models, W1, fold1, floor, inside1),
                 rollout=error_table(spec, models, WH, foldH, floor, insideH)))
+    bar.close()
     return dict(spec=spec, base=base, sigma=sigma, floor=floor, windows=windows, steps=steps,
                 W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
                 P0=P0, P1=P1, P1_folds=after, errors=errors,
-                contact=contact_summary(spec, steps), horizon=horizon,
+                contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
+                nuisance=nuisance, fits_free=fits_free,
                 seconds=time.perf_counter() - start)
 
 

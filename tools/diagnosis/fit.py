@@ -59,6 +59,8 @@ class Problem:
     fold: np.ndarray           # [W] fold id (0..K-1), -1 = not used
     weight: np.ndarray         # [H, n] = 1 / prediction floor
     cluster_steps: int = 50
+    min_reduction: float | None = None   # significance: held-out SSR cut (None: the spec's)
+    min_z: float = -np.inf               # ... and paired z against the unmodified model
 
     @property
     def horizon(self) -> int:
@@ -82,7 +84,7 @@ class Problem:
         W = self.windows
         cut = Windows(W.X0, W.Xt[:, :horizon], W.U[:, :LAG + horizon], W.row, W.episode, W.t0)
         return Problem(self.spec, self.base, cut, self.fold, self.weight[:horizon],
-                       self.cluster_steps)
+                       self.cluster_steps, self.min_reduction, self.min_z)
 
     def residuals(self, effects, W: Windows) -> np.ndarray:
         """[W, H, n] normalised rollout residuals of the model with `effects` added."""
@@ -107,11 +109,13 @@ class Fit:
     test_ssr: float = np.nan   # cross-validated
     test_n: int = 0
     test_cluster_ssr: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    test_window_ssr: np.ndarray = field(default_factory=lambda: np.zeros(0))
     score: float = np.nan
     z_vs_none: float = 0.0
     reduction: float = 0.0
     significant: bool = False
     shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    lin: tuple | None = field(default=None, repr=False)   # (r, J', lo, hi, [W, H, n])
 
     @property
     def num_params(self) -> int:
@@ -163,29 +167,57 @@ def fit_candidates(prob: Problem, cands, init=None, ci: bool = True, W=None) -> 
             init = np.concatenate([c.nominal(spec) for c in cands])
     init = np.clip(np.asarray(init, float), lo + 1e-12, hi - 1e-12)
     scale = np.maximum(np.abs(hi - lo) / 20.0, 1e-6)
-    theta, r, Jt = levenberg_marquardt(fun, init, lo, hi, scale)
+    ftol, xtol = getattr(spec, "fit_tolerance", (1e-10, 1e-9))
+    theta, r, Jt = levenberg_marquardt(fun, init, lo, hi, scale, ftol=ftol, xtol=xtol)
+    lin = (r, Jt, lo, hi, (len(W), prob.horizon, -1))
     if not ci:
         return Fit(tuple(cands), theta, np.zeros((len(theta), 2)), np.zeros(len(theta)),
-                   float(r @ r))
+                   float(r @ r), lin=lin)
     sd = _sandwich_sd(Jt, r, prob.clusters(W), W)
     ci = np.stack([theta - 1.96 * sd, theta + 1.96 * sd], 1)
-    return Fit(tuple(cands), theta, ci, sd, float(r @ r))
+    return Fit(tuple(cands), theta, ci, sd, float(r @ r), lin=lin)
+
+
+def _linear(prob: Problem) -> bool:
+    """Refits (folds, jackknife, half horizon) by one Gauss-Newton step (costly models)."""
+    return bool(getattr(prob.spec, "linear_refits", False))
+
+
+def linear_refit(fit: Fit, keep=None, horizon: int | None = None) -> np.ndarray:
+    """The refit's values on a subset of the windows (keep [W] bool) and/or the first
+    `horizon` rollout steps, as one Gauss-Newton step from the all-data optimum with the
+    residuals and Jacobian already there (no rollout; the infinitesimal jackknife)."""
+    r, Jt, lo, hi, shape = fit.lin
+    R = r.reshape(shape)
+    J = Jt.reshape((len(Jt),) + R.shape)
+    if keep is not None:
+        R, J = R[keep], J[:, keep]
+    if horizon is not None:
+        R, J = R[:, :horizon], J[:, :, :horizon]
+    Jf = J.reshape(len(J), -1)
+    A = Jf @ Jf.T
+    step = -np.linalg.solve(A + 1e-9 * np.trace(A) * np.eye(len(A)) + 1e-300, Jf @ R.ravel())
+    return np.clip(fit.values + step, lo, hi)
 
 
 def cv_fit(prob: Problem, cands, init=None) -> Fit:
     """Fit on all the data (grid + LM), then once per fold without that fold."""
     fit = fit_candidates(prob, cands, init)
+    used_fold = prob.fold[prob.fold >= 0]
     for k in prob.folds:
-        fit.fold_values[k] = fit_candidates(prob, cands, init=fit.values, ci=False,
-                                            W=prob.train(k)).values
+        fit.fold_values[k] = (linear_refit(fit, keep=used_fold != k) if _linear(prob) else
+                              fit_candidates(prob, cands, init=fit.values, ci=False,
+                                             W=prob.train(k)).values)
     return fit
 
 
 def widen_for_bias(prob: Problem, fit: Fit) -> Fit:
     """Add the horizon sensitivity to the sandwich interval (see the module doc)."""
-    short = fit_candidates(prob.truncated(max(prob.horizon // 2, 1)), list(fit.cands),
-                           init=fit.values, ci=False)
-    fit.shift = fit.values - short.values
+    half = max(prob.horizon // 2, 1)
+    short = (linear_refit(fit, horizon=half) if _linear(prob) else
+             fit_candidates(prob.truncated(half), list(fit.cands), init=fit.values,
+                            ci=False).values)
+    fit.shift = fit.values - short
     fit.sd = np.sqrt(fit.sd ** 2 + fit.shift ** 2)
     fit.ci = np.stack([fit.values - 1.96 * fit.sd, fit.values + 1.96 * fit.sd], 1)
     return fit
@@ -203,7 +235,8 @@ def jackknife(prob: Problem, fit: Fit, groups: int = 8) -> Fit:
     ids = np.unique(gid)
     if len(ids) < 3:
         return fit
-    est = np.array([fit_candidates(prob, list(fit.cands), init=fit.values, ci=False,
+    est = np.array([linear_refit(fit, keep=gid != g) if _linear(prob) else
+                    fit_candidates(prob, list(fit.cands), init=fit.values, ci=False,
                                    W=W.take(gid != g)).values for g in ids])
     G = len(ids)
     sd_jk = np.sqrt((G - 1) / G * np.sum((est - est.mean(0)) ** 2, 0))
@@ -227,10 +260,12 @@ def _jacobian(fun, x, r, lo, hi, scale):
     return Jt
 
 
-def levenberg_marquardt(fun, x0, lo, hi, scale, max_iter: int = 30):
+def levenberg_marquardt(fun, x0, lo, hi, scale, max_iter: int = 30, ftol: float = 1e-10,
+                        xtol: float = 1e-9):
     """Bounded (projected) Levenberg-Marquardt for a few parameters and many residuals.
     Returns (x, residuals at x, Jacobian at x). scipy's least_squares spends most of its
-    time on n_residuals-sized linear algebra; here every step is a p x p solve."""
+    time on n_residuals-sized linear algebra; here every step is a p x p solve. Stops when
+    the cost falls by <= ftol (relative) or no parameter moves by more than xtol * scale."""
     x = np.asarray(x0, float).copy()
     r = fun(x)
     cost, mu = r @ r, 1e-3
@@ -250,7 +285,7 @@ def levenberg_marquardt(fun, x0, lo, hi, scale, max_iter: int = 30):
             mu *= 8.0
         if not improved:
             break
-        done = (cost - cn) <= 1e-10 * cost or np.all(np.abs(xn - x) <= 1e-9 * scale)
+        done = (cost - cn) <= ftol * cost or np.all(np.abs(xn - x) <= xtol * scale)
         x, r, cost, mu = xn, rn, cn, max(mu / 4.0, 1e-9)
         Jt = _jacobian(fun, x, r, lo, hi, scale)
         if done:
@@ -272,18 +307,22 @@ def _sandwich_sd(Jt, r, cl, W: Windows) -> np.ndarray:
     return np.sqrt(np.maximum(np.diag(cov), 0.0))
 
 
-def evaluate(prob: Problem, fit: Fit | None) -> tuple[float, int, np.ndarray]:
-    """Cross-validated SSR, residual count and per-cluster SSR (None = unmodified)."""
+def evaluate(prob: Problem, fit: Fit | None):
+    """Cross-validated SSR, residual count, per-cluster SSR and per-window SSR [W used, in
+    prob.used() order] (fit None = the unmodified model)."""
     ssr, n, per_c = 0.0, 0, []
+    used_fold = prob.fold[prob.fold >= 0]
+    per_window = np.zeros(len(used_fold))
     for k in prob.folds:
         W = prob.test(k)
         effects = [] if fit is None else fit.fold_effects(prob.spec, k)
         r = prob.residuals(effects, W)
         per_w = np.sum(r.reshape(len(W), -1) ** 2, 1)
+        per_window[used_fold == k] = per_w
         ssr += float(per_w.sum())
         n += r.size
         per_c.append(np.bincount(prob.clusters(W), weights=per_w))
-    return ssr, n, np.concatenate(per_c) if per_c else np.zeros(0)
+    return ssr, n, np.concatenate(per_c) if per_c else np.zeros(0), per_window
 
 
 def _score(ssr, n, p, horizon):
@@ -301,14 +340,16 @@ def paired_z(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
-    ssr0, n, per0 = none_eval
-    fit.test_ssr, fit.test_n, fit.test_cluster_ssr = evaluate(prob, fit)
+    ssr0, n, per0, _ = none_eval
+    fit.test_ssr, fit.test_n, fit.test_cluster_ssr, fit.test_window_ssr = evaluate(prob, fit)
     fit.score = _score(fit.test_ssr, n, fit.num_params, prob.horizon)
     fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
     fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
-    min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
+    min_red = prob.min_reduction
+    if min_red is None:
+        min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
     fit.significant = bool(fit.score < _score(ssr0, n, 0, prob.horizon) - SCORE_MARGIN
-                           and fit.reduction >= min_red)
+                           and fit.reduction >= min_red and fit.z_vs_none >= prob.min_z)
     return fit
 
 
@@ -324,8 +365,21 @@ def _choose(fits, equal_rel: float = 0.0):
     return min(equal, key=lambda f: (not f.physical, f.num_params, f.score))
 
 
-def select(prob: Problem, cands, progress=None, pairs: bool = True):
-    """Fit everything, choose. Returns (chosen Fit or None, all fits, none evaluation)."""
+def fit_nuisance(prob: Problem) -> list:
+    """Fits of the spec's nuisance effects (spec.nuisance: [(name, target)]) that the
+    held-out data support, each then kept in prob.base for everything that follows."""
+    kept = []
+    for name, target in getattr(prob.spec, "nuisance", ()):
+        f = score_fit(prob, cv_fit(prob, [Candidate(name, target)]), evaluate(prob, None))
+        if f.significant:
+            prob.base = list(prob.base) + f.effects(prob.spec)
+            kept.append(f)
+    return kept
+
+
+def select(prob: Problem, cands, progress=None, pairs: bool = True, offset: int = 0):
+    """Fit everything, choose. Returns (chosen Fit or None, all fits, none evaluation).
+    progress: a Progress bar advanced to offset + fits done."""
     none_eval = evaluate(prob, None)
     fits, by_cand = [], {}
     for i, c in enumerate(cands):
@@ -338,7 +392,7 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True):
         fits.append(f)
         by_cand[c] = f
         if progress:
-            progress.update(i + 1)
+            progress.update(offset + i + 1)
     eligible = list(fits)
     if pairs:
         singles = sorted([f for f in fits if f.physical],
@@ -354,7 +408,7 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True):
             if f.test_ssr < (1 - pair_red) * min(a.test_ssr, b.test_ssr):
                 eligible.append(f)
             if progress:
-                progress.update(len(fits))
+                progress.update(offset + len(fits))
     chosen = _choose(eligible, getattr(prob.spec, "equal_reduction", 0.0))
     if chosen is not None:
         if not len(chosen.shift):

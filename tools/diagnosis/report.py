@@ -28,10 +28,10 @@ def _params(fit, spec):
     return out
 
 
-def candidate_rows(result) -> list:
+def candidate_rows(result, key: str = "fits") -> list:
     spec = result["spec"]
     rows = []
-    for f in sorted(result["fits"], key=lambda f: f.score):
+    for f in sorted(result.get(key) or [], key=lambda f: f.score):
         effects = _params(f, spec)
         row = dict(name=" + ".join(e["name"] for e in effects),
                    target=" + ".join(e["target"] for e in effects),
@@ -56,12 +56,41 @@ def selected_rows(result) -> list:
         e["held_out_error"] = dict(normalised_rms=float(np.sqrt(chosen.test_ssr / chosen.test_n)),
                                    ssr_reduction=float(chosen.reduction))
         e["penalty_score"] = float(chosen.score)
+        e["favoured"] = (result.get("judged") or {}).get("verdict", "named") == "named"
         out.append(e)
     return out
 
 
 def _fmt(v):
     return f"{v:.3g}"
+
+
+def _judged(result) -> dict:
+    """report.json's verdict, ambiguous set, separating excitation and evidence windows."""
+    j = result.get("judged") or dict(verdict="none" if result["chosen"] is None else "named",
+                                     ambiguous=[], separating_excitation=[])
+    return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence")
+            if k in j}
+
+
+def ambiguity_summary(report) -> str:
+    """Sentences on where the evidence sits and, for an ambiguous verdict, what would
+    settle it."""
+    ev, out = report.get("evidence"), ""
+    if ev and ev["windows"]:
+        w = ev["windows"][0]
+        out = (f" {100 * ev['share_in_phases']:.0f}% of the held-out gain is in "
+               f"{'/'.join(ev['phases']) or 'all'} windows (the largest: episode "
+               f"{w['episode']}, {w['start']:.2f}-{w['end']:.2f} s, {w['phase']}).")
+    if report.get("verdict") != "ambiguous":
+        return out
+    names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "
+                      f"(held-out {_fmt(a['held_out_score'])})" for a in report["ambiguous"])
+    fix = "; ".join(f"{' vs '.join(p['between'])}: {p['change']}"
+                    for p in report["separating_excitation"])
+    return out + (f" AMBIGUOUS: the held-out data do not favour one of {names} beyond "
+                  f"their uncertainty; the first is only the best-scoring. To separate "
+                  f"them: {fix}.")
 
 
 def plain_summary(result, selected) -> str:
@@ -252,20 +281,26 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
     report = dict(
         model=spec.name, horizon_steps=result["horizon"], dt=spec.dt, split=result["split"],
         scenario_effects=[dict(name=c.name, target=c.target, value=[float(v) for v in p])
-                          for c, p in result["base"]],
+                          for c, p in result["base"]
+                          if all(c not in f.cands for f in result.get("nuisance", []))],
+        nuisance=[dict(_params(f, spec)[0], ssr_reduction=float(f.reduction),
+                       note="fitted first and kept in the model for every candidate "
+                            "(the recorded states lag the recorded inputs)")
+                  for f in result.get("nuisance", [])],
         noise_floor={n: float(s) for n, s in zip(spec.state_names, result["sigma"])},
         mismatch_windows=result["windows"],
         mismatch_windows_total=int(result["steps"]["total_windows"]),
         contact_agreement=result["contact"],
         candidates=candidate_rows(result),
+        free_window_candidates=candidate_rows(result, "fits_free"),
         not_applicable=[dict(name=k, reason=v) for k, v in result["not_applicable"].items()],
-        selected=selected,
+        selected=selected, **_judged(result),
         error_before=result["errors"]["before"], error_after=result["errors"]["after"],
         patched_scenario="patched_scenario.yaml", patched_scenario_notes=list(scenario_notes),
         seconds=float(result["seconds"]))
     result["error_before"], result["error_after"] = report["error_before"], report["error_after"]
     result["mismatch_windows"] = result["windows"]
-    report["summary"] = plain_summary(result, selected)
+    report["summary"] = plain_summary(result, selected) + ambiguity_summary(report)
     (out / "report.json").write_text(json.dumps(report, indent=1))
     files = _plots(out, rec, result)
     _write_html(out / "report.html", report, files)

@@ -1,0 +1,62 @@
+"""`adaptive-c3 bench diagnose`: wall time of one ball-rolling diagnosis.
+
+Rows
+  diagnose/ball/15ep               `diagnose` + its report (report.json, report.html,
+                                   plots) on a 15-episode, 1.6 s-per-episode concealed-draw
+                                   recording (2400 samples at 100 Hz, made by the SAP harness,
+                                   not timed), as the CLI runs it; median of the repeats.
+  diagnose/ball/15ep/exact_refits  the same with the earlier fit settings, measured in the
+                                   same run (full only): every fold / jackknife / half-horizon
+                                   refit by Levenberg-Marquardt, tolerances 1e-10 / 1e-9.
+                                   The first row carries baseline/speedup against it.
+"""
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+SEED = 5001                 # a contact_offset[ball_table] draw, with the second-engine variation
+
+
+def _timed(rec, spec) -> tuple[float, float, str]:
+    """(wall s of diagnose + report, of diagnose alone, selected label)."""
+    from adaptive_c3.tools.diagnosis.diagnose import diagnose
+    from adaptive_c3.tools.diagnosis.report import write_report
+    t0 = time.perf_counter()
+    result = diagnose(rec, spec, progress=False)
+    t1 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as tmp:
+        write_report(Path(tmp), rec, result)
+    t2 = time.perf_counter()
+    chosen = result["chosen"]
+    return t2 - t0, t1 - t0, chosen.label() if chosen is not None else "none"
+
+
+def run_bench(quick: bool = False) -> list[dict]:
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
+    from adaptive_c3.tools.diagnosis.effects_ball import ModelParams, ball_spec
+    scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
+    rec, truth, _ = concealed_draw(SEED, params=ModelParams.from_scenario(scenario))
+    runs = [_timed(rec, ball_spec(scenario)) for _ in range(1 if quick else 3)]
+    wall = float(np.median([r[0] for r in runs]))
+    row = {"name": "diagnose/ball/15ep", "median_ms": wall * 1e3, "wall_s": wall,
+           "diagnose_s": float(np.median([r[1] for r in runs])), "samples": len(rec.t),
+           "episodes": int(len(np.unique(rec.episode))), "truth": truth.name, "selected": runs[0][2]}
+    rows = [row]
+    if not quick:
+        slow = replace(ball_spec(scenario), linear_refits=False, fit_tolerance=(1e-10, 1e-9))
+        s_wall, s_diag, s_sel = _timed(rec, slow)
+        rows.append({"name": "diagnose/ball/15ep/exact_refits", "median_ms": s_wall * 1e3,
+                     "wall_s": s_wall, "diagnose_s": s_diag, "selected": s_sel})
+        row.update(baseline=rows[1]["name"], speedup=s_wall / wall)
+    return rows
+
+
+if __name__ == "__main__":
+    for r in run_bench(quick=True):
+        print(r)

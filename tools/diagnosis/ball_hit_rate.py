@@ -1,0 +1,112 @@
+"""Per-effect hit rates of `diagnose` on concealed ball-rolling draws (issue 19's marks).
+
+    python -m adaptive_c3.tools.diagnosis.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
+
+Each draw (tools/diagnosis/concealed_ball_data.py, with the second-engine variation) is
+diagnosed and scored:
+  named          the concealed effect (or none) is the one selected, i.e. named first
+  favoured       ... and the verdict is `named` (not ambiguous)
+  in_interval    named, and the effective truth inside the reported 95% interval
+  ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
+  excess cut     held-out rollout excess-over-noise (noisy data) before / after
+  clean cut      the same against the noise-free states (NOISE_STD units)
+Writes DIR/ball_hit_rate.json (summary + rows, after every draw) and DIR/ball_hit_rate.png.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+import numpy as np
+
+from adaptive_c3.tools.diagnosis.concealed_ball_data import label as _label, score_draw
+
+TARGETS = dict(named=0.90, none_on_clean=1.0, coverage=0.85, truth_in_ambiguous=1.0,
+               median_excess_cut=5.0)
+
+
+def summarise(rows) -> dict:
+    def rate(rs, key):
+        return float(np.mean([bool(r[key]) for r in rs])) if rs else None
+    eff = [r for r in rows if r["truth"]["name"] != "none"]
+    clean = [r for r in rows if r["truth"]["name"] == "none"]
+    named_eff = [r for r in eff if r["named"]]
+    amb = [r for r in rows if r["verdict"] == "ambiguous"]
+    per = {}
+    for r in rows:
+        per.setdefault(_label(r["truth"]["name"], r["truth"]["target"]), []).append(r)
+    return dict(
+        draws=len(rows), named=rate(rows, "named"), named_effect_draws=rate(eff, "named"),
+        favoured=rate(rows, "favoured"), none_on_clean=rate(clean, "named"),
+        clean_draws=len(clean), coverage=rate(named_eff, "in_interval"),
+        named_effect_count=len(named_eff), ambiguous_draws=len(amb),
+        truth_in_ambiguous=rate(amb, "in_ambiguous_set"),
+        median_excess_cut=float(np.median([r["excess_cut"] for r in named_eff]))
+        if named_eff else None,
+        median_clean_cut=float(np.median([r["clean_cut"] for r in named_eff]))
+        if named_eff else None,
+        per_effect={k: dict(draws=len(v), named=rate(v, "named"),
+                            ambiguous=sum(r["verdict"] == "ambiguous" for r in v),
+                            truth_in_ambiguous=rate([r for r in v if r["verdict"] ==
+                                                     "ambiguous"], "in_ambiguous_set"),
+                            in_interval=rate(v, "in_interval")) for k, v in sorted(per.items())},
+        targets=TARGETS)
+
+
+def plot(summary, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    per = summary["per_effect"]
+    names = list(per)
+    x = np.arange(len(names))
+    fig, ax = plt.subplots(figsize=(10, 4))
+    for i, (key, lab) in enumerate((("named", "named first"), ("in_interval", "truth in 95% CI"),
+                                    ("truth_in_ambiguous", "truth in ambiguous set"))):
+        vals = [per[n][key] if per[n][key] is not None else np.nan for n in names]
+        ax.bar(x + (i - 1) * 0.27, vals, 0.27, label=lab)
+    ax.set_xticks(x, [f"{n}\n(n={per[n]['draws']})" for n in names], rotation=30, ha="right",
+                  fontsize=8)
+    ax.axhline(0.9, color="k", lw=0.5, ls="--")
+    ax.set_ylim(0, 1.05)
+    ax.set_title(f"diagnose on {summary['draws']} concealed ball draws: named first "
+                 f"{summary['named']:.0%}, coverage {summary['coverage'] or 0:.0%}")
+    ax.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def run(draws: int, first_seed: int, out: Path, **kw) -> dict:
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for s in range(first_seed, first_seed + draws):
+        r = score_draw(s, baseline=False, **kw)
+        rows.append(r)
+        sel = "+".join(_label(x["name"], x.get("target", "")) for x in r["selected"])
+        print(f"seed {s}: truth {_label(r['truth']['name'], r['truth']['target'])}="
+              f"{r['truth']['value']:.4g} -> {sel} ({r['verdict']}"
+              f"{': ' + ', '.join(r['ambiguous']) if r['ambiguous'] else ''}) "
+              f"named={r['named']} in_ci={r['in_interval']} excess cut={r['excess_cut']:.3g} "
+              f"({r['seconds']:.1f}s)", flush=True)
+        summary = summarise(rows)
+        (out / "ball_hit_rate.json").write_text(
+            json.dumps(dict(summary=summary, rows=rows), indent=1, default=float))
+    plot(summary, out / "ball_hit_rate.png")
+    return summary
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description="per-effect hit rates of diagnose on concealed "
+                                             "ball-rolling draws")
+    ap.add_argument("draws", type=int, nargs="?", default=40)
+    ap.add_argument("first_seed", type=int, nargs="?", default=7000)
+    ap.add_argument("--out", default="runs/ball_hit_rate")
+    args = ap.parse_args(argv)
+    print(json.dumps(run(args.draws, args.first_seed, Path(args.out)), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

@@ -1,0 +1,268 @@
+"""Which windows carry the evidence for an effect, which candidates the held-out data
+cannot tell apart, and the excitation that would separate them (ball rolling).
+
+Phases of a rollout window (from the model's cached signed distances along the recording
+and the recorded ball velocity): `coast` (the EE >= 4 mm clear of the ball for the whole
+window, the ball on the table and rolling >= 0.02 m/s), `rest` (EE clear, ball slower),
+`push` (the EE within 1 mm of the ball somewhere in the window), `other`. Each effect acts
+where physics says: rolling resistance (a constant deceleration) and viscous drag (one
+proportional to speed) during coasts, a constant external force during coasts and at
+rest (a drift in a fixed direction), mass during pushes (the EE's response to its known
+force includes the ball's inertia), EE-ball friction and offsets during pushes.
+
+Ambiguity (see `verdict`): candidate f is not distinguishable from the best b when its
+held-out SSR is not clearly larger: sum_c (SSR_c(f) - SSR_c(b)) < Z_AMBIG * sqrt(C var_c)
+over the C clusters of the cross-validation (episodes x 0.5 s blocks), and f itself
+clearly beats the unmodified model (paired z >= Z_AMBIG).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+Z_AMBIG = 2.0
+EE_CLEAR = 0.004          # m: EE-ball gap of a free window
+EE_TOUCH = 0.001          # m: EE-ball gap of a push window
+ON_TABLE = 0.003          # m: ball-table gap of a rolling ball
+MOVING = 0.02             # m/s
+
+EFFECT_PHASES = {
+    "rolling_resistance": ("coast",), "viscous_damping": ("coast",),
+    "external_force": ("coast", "rest"), "mass_scale": ("push",),
+    "friction_coefficient": ("push",), "contact_offset": ("push", "coast", "rest"),
+}
+
+# (effect a, effect b) -> the excitation that separates them, as a scenario / gait change
+SEPARATING = {
+    frozenset({"rolling_resistance", "viscous_damping"}):
+        "a free coast of >= 0.5 s from >= 0.1 m/s (push length >= 0.08 m at >= 8 m/s^2, "
+        "then hold the EE >= 5 mm clear): rolling resistance decelerates the ball at a "
+        "constant rate, viscous drag in proportion to its speed",
+    frozenset({"external_force", "rolling_resistance"}):
+        "coasts in opposite directions (pushes along +x, -x, +y, -y): a fixed force speeds "
+        "the ball up one way and slows it the other, rolling resistance always opposes motion",
+    frozenset({"external_force", "viscous_damping"}):
+        "coasts in opposite directions and a ball left at rest for >= 1 s: a fixed force "
+        "drifts a resting ball, drag never moves it",
+    frozenset({"mass_scale", "friction_coefficient"}):
+        "pushes at two peak accelerations (2 and >= 8 m/s^2) with the same press: a lighter "
+        "or heavier ball changes the EE's response in proportion to the acceleration, low "
+        "EE-ball friction shows only when the push approaches slip",
+    frozenset({"mass_scale", "contact_offset"}):
+        "pushes with two press depths (3 and 8 mm): an offset shifts where contact starts, "
+        "the mass scales the EE's response to its force once in contact",
+    frozenset({"friction_coefficient", "contact_offset"}):
+        "pushes with two press depths (3 and 8 mm) at >= 8 m/s^2: friction limits the "
+        "tangential force at a given normal force, an offset shifts the normal force",
+}
+DEFAULT_SEPARATION = ("a longer recording (>= 25 episodes) mixing slow and fast pushes, "
+                      "free coasts of >= 0.5 s and rests of >= 1 s")
+
+
+def window_phases(spec, W) -> np.ndarray:
+    """[W] phase name per rollout window (all `other` for models without the cache)."""
+    cache = getattr(spec, "cache", None) or {}
+    out = np.full(len(W), "other", dtype=object)
+    if "phi" not in cache:
+        return out
+    H = W.Xt.shape[1]
+    rows = np.asarray(W.row)[:, None] + np.arange(H + 1)[None, :]
+    rows = np.minimum(rows, len(cache["phi"]) - 1)
+    gap_ee, gap_tab = cache["phi"][rows, 0], cache["phi"][rows, 1]
+    speed = np.linalg.norm(W.X0[:, 16:18], axis=1)
+    clear = gap_ee.min(1) > EE_CLEAR
+    on_table = gap_tab.max(1) < ON_TABLE
+    out[clear & on_table & (speed >= MOVING)] = "coast"
+    out[clear & on_table & (speed < MOVING)] = "rest"
+    out[gap_ee.min(1) < EE_TOUCH] = "push"
+    return out
+
+
+def evidence_windows(spec, W, phases, gain, name: str, top: int = 5) -> dict:
+    """Where the held-out error fell (gain [W] = SSR before - after per window): the share
+    carried by the effect's own phases and its largest contiguous runs there."""
+    own = np.isin(phases, EFFECT_PHASES.get(name, ("coast", "rest", "push", "other")))
+    total = float(np.sum(gain))
+    runs, start = [], 0
+    for i in range(1, len(W) + 1):      # runs: same episode, same phase, consecutive rows
+        if i < len(W) and W.episode[i] == W.episode[start] and phases[i] == phases[start] \
+                and W.row[i] - W.row[i - 1] <= 5:
+            continue
+        if own[start]:
+            sel = slice(start, i)
+            speed = np.linalg.norm(W.X0[sel, 16:18], axis=1) if W.X0.shape[1] > 17 else [0.0]
+            runs.append(dict(episode=int(W.episode[start]), start=float(W.t0[start]),
+                             end=float(W.t0[i - 1] + W.Xt.shape[1] * spec.dt),
+                             phase=str(phases[start]), gain=float(np.sum(gain[sel])),
+                             ball_speed=[float(np.min(speed)), float(np.max(speed))]))
+        start = i
+    runs.sort(key=lambda r: -r["gain"])
+    for r in runs:
+        r["share"] = r["gain"] / total if total > 0 else 0.0
+    return dict(phases=list(EFFECT_PHASES.get(name, ())),
+                share_in_phases=float(np.sum(gain[own]) / total) if total > 0 else 0.0,
+                phase_windows={p: int(np.sum(phases == p)) for p in ("coast", "rest", "push")},
+                windows=runs[:top])
+
+
+MORE_EVIDENCE = {        # effect -> the excitation that gives it more evidence
+    "mass_scale": "more pushes (>= 25) at peak accelerations of 5-10 m/s^2: the ball's "
+                  "inertia shows in the EE's response to its known force",
+    "friction_coefficient": "pushes at >= 8 m/s^2 with a light press (3 mm): low EE-ball "
+                            "friction shows as slip",
+    "rolling_resistance": "free coasts of >= 0.5 s from >= 0.1 m/s",
+    "viscous_damping": "free coasts of >= 0.5 s from >= 0.2 m/s (drag grows with speed)",
+    "external_force": "a ball left at rest for >= 1 s and coasts in opposite directions",
+    "contact_offset": "slow touch-downs (EE descending at <= 2 cm/s) and >= 1 s rests",
+}
+
+
+def _paired(a: np.ndarray, b: np.ndarray) -> float:
+    """z of sum(a - b) over clusters (positive: b better)."""
+    d = a - b
+    sd = d.std(ddof=1) * np.sqrt(len(d)) if len(d) > 1 else 0.0
+    return float(d.sum() / sd) if sd > 0 else (np.inf if d.sum() > 0 else 0.0)
+
+
+def fit_row(f, none_eval) -> dict:
+    """One member of the ambiguous set (f None: the unmodified model)."""
+    if f is None:
+        return dict(name="none", target="", held_out_score=float(np.sqrt(none_eval[0] /
+                                                                         none_eval[1])),
+                    ssr_reduction=0.0, z_vs_none=0.0)
+    return dict(name=f.cands[0].name if len(f.cands) == 1 else f.label(),
+                target=f.cands[0].target if len(f.cands) == 1 else "",
+                values=[float(v) for v in f.values],
+                held_out_score=float(np.sqrt(f.test_ssr / f.test_n)),
+                ssr_reduction=float(f.reduction), z_vs_none=float(f.z_vs_none))
+
+
+def verdict(fits, chosen, none_eval, min_reduction: float) -> dict:
+    """named | ambiguous | none, the ambiguous set (best first; None = the unmodified model)
+    and, per competitor of the best, the excitation that would separate them.
+
+    The set holds the chosen fit; every single physical effect that clearly beats the
+    unmodified model across clusters (paired z >= Z_AMBIG) and is not clearly worse than
+    the chosen one (paired z < Z_AMBIG); and `none` when the chosen fit's gain is not
+    consistent across clusters (z < Z_AMBIG: a few events carry it). With nothing chosen,
+    singles with z >= Z_AMBIG and at least half the reduction a choice needs join `none`."""
+    singles = [f for f in sorted(fits, key=lambda f: f.score)
+               if len(f.cands) == 1 and f.physical and f.z_vs_none >= Z_AMBIG]
+    if chosen is None:
+        near = [f for f in singles if f.reduction >= 0.5 * min_reduction]
+        members = [None] + near if near else []
+    else:
+        members = [chosen] + [f for f in singles if f.cands != chosen.cands and _paired(
+            f.test_cluster_ssr, chosen.test_cluster_ssr) < Z_AMBIG]
+        if chosen.z_vs_none < Z_AMBIG:
+            members.append(None)
+    if len(members) < 2:
+        return dict(verdict="none" if chosen is None else "named", ambiguous=[],
+                    separating_excitation=[])
+    best = members[0]
+
+    def row(f):
+        return fit_row(f, none_eval)
+
+    def name(f):
+        return "none" if f is None else f.cands[0].name
+    proposals = []
+    for f in members[1:]:
+        a, b = name(best), name(f)
+        if "none" in (a, b):
+            other = b if a == "none" else a
+            text = MORE_EVIDENCE.get(other, DEFAULT_SEPARATION)
+        else:
+            text = SEPARATING.get(frozenset({a, b}), DEFAULT_SEPARATION)
+        proposals.append(dict(between=[row(best)["name"], row(f)["name"]], change=text))
+    return dict(verdict="ambiguous", ambiguous=[row(f) for f in members],
+                separating_excitation=proposals)
+
+
+# ------------------------------------------------------------------ free-ball windows
+FREE_EFFECTS = ("rolling_resistance", "viscous_damping", "external_force")
+FREE_PHASES = ("coast", "rest")
+
+
+# On free windows the model's contact artifacts are small, and so are the free-ball
+# effects' shares of the SSR (mostly sensor noise over a 0.1 s rollout): there an effect
+# must cut the held-out SSR by >= 1.5 % with a paired z >= 4.5 across clusters (on the
+# clean calibration draws the best spurious free-window fit reached z 3.1, 1.5 %).
+FREE_MIN_REDUCTION = 0.015
+FREE_MIN_Z = 4.5
+
+
+def free_ball_problem(prob):
+    """The same fit problem restricted to the windows where the ball rolls or rests
+    without the EE (None when fewer than two folds keep such windows)."""
+    from adaptive_c3.tools.diagnosis.fit import Problem
+    free = np.isin(window_phases(prob.spec, prob.windows), FREE_PHASES)
+    fold = np.where(free, prob.fold, -1)
+    sub = Problem(prob.spec, prob.base, prob.windows, fold, prob.weight, prob.cluster_steps,
+                  FREE_MIN_REDUCTION, FREE_MIN_Z)
+    return sub if len(sub.folds) >= 2 else None
+
+
+def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float):
+    """(chosen, judged, free fits, (problem, none evaluation) the choice was scored on):
+    the free-ball effects fitted and judged on the free
+    windows only (their own evidence, away from the model's contact artifacts). A
+    free-ball effect significant there replaces a global choice that is none, itself
+    a free-ball effect, or not consistent across clusters; a replaced push-phase choice
+    joins the ambiguous set. A consistent push-phase choice stays, with the free-window
+    effect added to its ambiguous set (each explains different windows)."""
+    from adaptive_c3.tools.diagnosis.fit import select
+    judged = verdict(fits, chosen, none_eval, min_reduction)
+    sub = free_ball_problem(prob) if getattr(prob.spec, "free_ball", False) else None
+    if sub is None:
+        return chosen, judged, [], (prob, none_eval)
+    free_c = [c for c in cands if c.name in FREE_EFFECTS]
+    chosen_f, fits_f, none_f = select(sub, free_c, pairs=False)
+    global_free = chosen is not None and chosen.cands[0].name in FREE_EFFECTS
+    if chosen_f is None:
+        return chosen, judged, fits_f, (prob, none_eval)
+    row_g = None if chosen is None else dict(fit_row(chosen, none_eval), note="all windows")
+    row_f = dict(fit_row(chosen_f, none_f), note="free windows")
+    if not (chosen is None or global_free or chosen.z_vs_none < Z_AMBIG):
+        _join(judged, row_g, row_f)
+        return chosen, judged, fits_f, (prob, none_eval)
+    judged_f = verdict(fits_f, chosen_f, none_f, min_reduction)
+    judged_f["free_windows"] = int(np.sum(sub.fold >= 0))
+    if chosen is not None and not global_free:       # a push-phase rival stays in the set
+        _join(judged_f, row_f, row_g)
+    return chosen_f, judged_f, fits_f, (sub, none_f)
+
+
+def _join(judged, first: dict, other: dict) -> None:
+    """Make the verdict ambiguous between `first` (kept first) and `other`."""
+    if not judged["ambiguous"]:
+        judged["ambiguous"] = [first]
+    judged["ambiguous"].append(other)
+    judged["separating_excitation"].append(dict(
+        between=[first["name"], other["name"]],
+        change=MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)))
+    judged["verdict"] = "ambiguous"
+
+
+def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
+    """Model-form allowance on the chosen fit's interval: the estimate refitted (one
+    Gauss-Newton step, fit.lin) on each phase's windows alone, over the phases holding
+    >= min_share of its information (sum of squared sensitivities); their spread (sd) is
+    added to the interval's sd. A value that depends on which windows are used is not
+    pinned down by the statistical interval (e.g. a compliant contact read as an offset)."""
+    from adaptive_c3.tools.diagnosis.fit import linear_refit
+    if fit is None or fit.lin is None:
+        return fit
+    ph = window_phases(prob.spec, prob.used())
+    Jt, shape = fit.lin[1], fit.lin[4]
+    info = np.sum(Jt.reshape((len(Jt), shape[0], -1)) ** 2, axis=(0, 2))     # [W]
+    keep = [p for p in ("coast", "rest", "push") if np.sum(ph == p) >= min_windows
+            and info[ph == p].sum() >= min_share * info.sum()]
+    if len(keep) < 2:
+        return fit
+    est = np.array([linear_refit(fit, keep=ph == p) for p in keep])
+    spread = est.std(axis=0, ddof=1)
+    q = (fit.ci[:, 1] - fit.values) / np.maximum(fit.sd, 1e-300)
+    fit.sd = np.sqrt(fit.sd ** 2 + spread ** 2)
+    fit.ci = np.stack([fit.values - q * fit.sd, fit.values + q * fit.sd], 1)
+    fit.phase_estimates = dict(zip(keep, est.tolist()))
+    return fit
