@@ -31,6 +31,23 @@ def load_hardware_scenario(args):
     return s, text, duration
 
 
+def _started_simulator(diagram, wait_for, wait_s: float):
+    """A Simulator of `diagram`, initialised (after the robot's first messages when
+    wait_for = (lcm, channels) is given), with the start-up heap frozen."""
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
+    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
+    sim = Simulator(diagram)
+    if wait_for is None:
+        sim.Initialize()
+    else:
+        print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
+        start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
+    freeze_heap()
+    return sim
+
+
 def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_start=None,
                  wait_s: float = 10.0):
     """Advance in real time until `duration` (None: Ctrl-C); returns (context, wall s).
@@ -38,18 +55,8 @@ def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_
     message (within wait_s, else a one-line FirstMessagesTimeout), with those messages in
     the context (first_messages.py). on_start(): called right after initialisation
     (diagram time 0)."""
-    from pydrake.systems.analysis import Simulator
-
-    from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
-    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
-    sim = Simulator(diagram)
+    sim = _started_simulator(diagram, wait_for, wait_s)
     sim.set_target_realtime_rate(1.0)
-    if wait_for is None:
-        sim.Initialize()
-    else:
-        print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
-        start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
-    freeze_heap()
     if on_start:
         on_start()
     print(label + (f" for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
@@ -82,17 +89,7 @@ def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
     silence and zeroes the torque after its stale limit. clock (s) and handle() (default
     lcm.HandleSubscriptions(1): returns on a message or after 1 ms) are injectable for
     tests."""
-    from pydrake.systems.analysis import Simulator
-
-    from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
-    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
-    sim = Simulator(diagram)
-    if wait_for is None:
-        sim.Initialize()
-    else:
-        print(f"waiting for {', '.join(wait_for[1])} ...", flush=True)
-        start_from_first_messages(sim, *wait_for, timeout_s=wait_s)
-    freeze_heap()
+    sim = _started_simulator(diagram, wait_for, wait_s)
     fresh = [0]
 
     def on_message(_data):
