@@ -81,7 +81,7 @@ def make_gait(s: BallRollingScenario) -> RollingGait:
                        ee_radius=s.model.ee_radius)
 
 
-# Reference weights (DESIGN.md section 4) on the 19-state.
+# The reference system's weights on the 19-state.
 ROLL_Q = [500.0] * 3 + [0.0] * 4 + [5000.0, 5000.0, 1000.0] + [10.0] * 3 + [0.1] * 6
 
 

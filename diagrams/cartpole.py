@@ -24,7 +24,7 @@ from adaptive_c3.scenarios.cartpole_schema import CartpoleScenario
 from adaptive_c3.systems.contact.lcs import Lcs
 from adaptive_c3.systems.contact.lcs_plant import LcsPlant
 
-# Reference C3 settings for the cart-pole (DESIGN.md section 4).
+# Reference C3 settings for the cart-pole (DAIRLab/c3's cart-pole).
 CARTPOLE_Q = [10.0, 3.0, 1.0, 1.0]
 CARTPOLE_R = [1.0]
 

@@ -2,7 +2,7 @@
 
 State x = [cart_x (m), pole_theta (rad), cart_xdot (m/s), pole_thetadot (rad/s)],
 input u = [cart_force (N)], lambda = [right (+x) wall force, left (-x) wall force] (N).
-Numbers are those of the C3 authors' public cart-pole (see DESIGN.md section 4).
+Numbers are those of the C3 authors' public cart-pole (DAIRLab/c3).
 """
 from __future__ import annotations
 

@@ -25,7 +25,7 @@ Q_MAX = np.array([2.8973, 1.7628, 2.8973, -0.0698, 2.8973, 3.7525, 2.8973])
 V_MAX = np.array([2.1750, 2.1750, 2.1750, 2.1750, 2.6100, 2.6100, 2.6100])
 TAU_MAX = np.array([87.0, 87.0, 87.0, 87.0, 12.0, 12.0, 12.0])
 
-# Null-space posture of the ball-rolling reference (DESIGN.md section 4).
+# Null-space posture of the ball-rolling reference system.
 Q_NULL = np.array([0.0, 0.361, 0.0, -2.223, 0.0, 2.584, 0.0])
 
 # The project's end-effector tool: a rod along the flange z axis ending in a sphere of

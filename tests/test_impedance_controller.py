@@ -1,7 +1,7 @@
 """Impedance controller: the pure law, and the closed loop on the simulated Panda.
 
 Closed loop = arm plant (time_step 1 ms, SAP) + GravityCompensatedDriver +
-ImpedanceController with the reference gains (DESIGN.md section 4).
+ImpedanceController with the reference gains (the reference system's).
 """
 import numpy as np
 import pytest

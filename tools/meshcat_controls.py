@@ -37,7 +37,7 @@ STOP_BUTTON = "Stop"
 
 
 def start_meshcat(port: int | None = None):
-    """A Meshcat server bound to localhost (DESIGN.md: not all interfaces)."""
+    """A Meshcat server bound to localhost (not all interfaces: nothing outside the machine can drive it)."""
     from pydrake.geometry import Meshcat, MeshcatParams
     return Meshcat(MeshcatParams(host="localhost", port=port))
 

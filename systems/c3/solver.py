@@ -241,7 +241,7 @@ class C3Options:
 
 
 def cartpole_c3_options(projection: str = "c3plus", **overrides) -> C3Options:
-    """Reference cart-pole settings (DESIGN.md section 4 / the C3 authors' cart-pole).
+    """Reference cart-pole settings (the C3 authors' public cart-pole, DAIRLab/c3).
 
     N = 10, Q = diag(10, 3, 1, 1), R = 1, QN = Riccati, 10 ADMM iterations, rho_scale 2,
     G = 0.1 on [x, lam] and 0 on u. U follows the reference cartpole options

@@ -33,7 +33,7 @@ from adaptive_c3.models.panda_kinematics import Q_NULL, TAU_MAX  # rad, N m
 
 @dataclass(frozen=True)
 class ImpedanceGains:
-    """Reference gains (DESIGN.md section 4)."""
+    """The reference system's gains (its public Franka impedance controller)."""
     translational_stiffness: float = 500.0   # N/m
     translational_damping: float = 45.0      # N s/m
     rotational_stiffness: float = 900.0      # N m/rad

@@ -60,7 +60,7 @@ def random_ballroll_lcs(seed: int = 0, n: int = 19, m: int = 8, k: int = 3,
 
 
 def ballroll_c3_options(projection: str = "c3plus", **overrides) -> C3Options:
-    """DESIGN.md's ball-rolling weights on the 19-state layout (N=5, G=0.001, U=1/100)."""
+    """The reference ball-rolling weights on the 19-state layout (N=5, G=0.001, U=1/100)."""
     q = np.r_[[500.0] * 3, [0.0] * 4, [5000.0, 5000.0, 1000.0], [10.0] * 3, [0.1] * 6]
     kw = dict(horizon=5, Q=np.diag(q), R=0.01 * np.eye(3), G=0.001 * np.ones(30),
               U=np.r_[100.0 * np.ones(19), np.ones(11)], rho_scale=2.0, admm_iter=10,

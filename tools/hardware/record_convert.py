@@ -5,7 +5,7 @@ Input: an LCM event log (the standard format `lcm-logger` writes; `adaptive-c3 h
   PANDA_STATUS   drake.lcmt_panda_status   (required)
   BALL_ESTIMATE  drake.lcmt_robot_state    (required; layout in tools/hardware/bridge.py)
   PANDA_COMMAND  drake.lcmt_panda_command  (optional: without it u = 0)
-Output: the recording format of DESIGN.md, sampled from the PANDA_STATUS messages:
+Output: the recording format of tools/recording.py, sampled from the PANDA_STATUS messages:
   t            s, from the first status: a uniform grid of step --dt (default 0.01 s,
                the diagnose model's step) taking the newest status at each grid time,
                or (--dt 0) every status at its log timestamp (receive time)
