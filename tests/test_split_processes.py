@@ -218,3 +218,13 @@ def test_status_driven_loop_ticks_per_status_and_zeroes_on_silence():
     report = proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx))
     assert report["mode"] == "stale" and report["counts"]["stale"] > 100
     assert max(abs(t) for t in commands[-1].joint_torque) == 0.0
+
+
+def test_wall_clock_planner_moves_its_warm_start_by_the_elapsed_time():
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.tools.hardware.planner_process import build_planner_process
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    assert s.c3.warm_start_shift == "knot"          # the simulation default
+    proc = build_planner_process(s, DrakeLcm("memq://"))
+    assert proc.controller.planner._shift_elapsed

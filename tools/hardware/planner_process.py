@@ -59,6 +59,9 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
                                                               add_planner, add_status_input)
     from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL
     from adaptive_c3.tools.hardware.plan_encoder import PlanEncoder
+    # C3's warm start moves by the time between plans (the diagram clock follows the
+    # wall clock here), not by one LCS step per solve
+    s = dataclasses.replace(s, c3=dataclasses.replace(s.c3, warm_start_shift="elapsed"))
     builder = DiagramBuilder()
     add_lcm(builder, lcm)
     # the planner's systems run at 80 Hz (C3, LCS) and 200 Hz (learner samples): the
