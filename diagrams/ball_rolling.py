@@ -119,9 +119,7 @@ def learner_options(s: BallRollingScenario) -> LearnerOptions:
                           Qd=qd, max_step=cfg.max_step, lr_decay_steps=cfg.lr_decay_steps)
 
 
-def make_impedance_controller(s: BallRollingScenario):
-    """The Panda's ImpedanceController with the scenario's gains (simulation and bridge)."""
-    from adaptive_c3.systems.franka.impedance_controller import ImpedanceController
+def _impedance_settings(s: BallRollingScenario):
     from adaptive_c3.systems.franka.impedance_law import ImpedanceGains
     imp = s.impedance
     gains = ImpedanceGains(translational_stiffness=imp.translational_stiffness,
@@ -131,7 +129,21 @@ def make_impedance_controller(s: BallRollingScenario):
                            nullspace_stiffness=imp.nullspace_stiffness,
                            nullspace_damping=imp.nullspace_damping,
                            operational_space=imp.operational_space)
-    return ImpedanceController(gains, tilt_deg=imp.ee_tilt_deg, q_null=imp.q_null)
+    return gains, {"tilt_deg": imp.ee_tilt_deg, "q_null": imp.q_null}
+
+
+def make_impedance_controller(s: BallRollingScenario):
+    """The Panda's ImpedanceController with the scenario's gains (simulation and bridge)."""
+    from adaptive_c3.systems.franka.impedance_controller import ImpedanceController
+    gains, kw = _impedance_settings(s)
+    return ImpedanceController(gains, **kw)
+
+
+def make_impedance_law(s: BallRollingScenario):
+    """The same law without the LeafSystem (the 1 kHz impedance process)."""
+    from adaptive_c3.systems.franka.impedance_controller import ImpedanceLaw
+    gains, kw = _impedance_settings(s)
+    return ImpedanceLaw(gains, **kw)
 
 
 def _add_robot(builder, plant, s, panda, ee_instance):

@@ -12,9 +12,8 @@ from pydrake.common.value import AbstractValue
 from adaptive_c3.scenarios.schema import load_scenario
 from adaptive_c3.tools import cli
 from adaptive_c3.tools.hardware.lcm_channels import decode_plan, encode_plan
-from adaptive_c3.tools.hardware.plan_decoder import PlanDecoder
+from adaptive_c3.tools.hardware.plan_hold import PlanHold
 from adaptive_c3.tools.hardware.split_loopback import run_split_loopback
-from adaptive_c3.tools.hardware.torque_gate import TorqueGate
 
 FAST = ["camera.enabled=false", "model.radius_error=0"]
 NOW = 1_764_000_000_000_000
@@ -52,36 +51,76 @@ def _status(utime, mode=None):
     return m
 
 
-def test_plan_decoder_holds_then_gives_up():
-    dec = PlanDecoder(period=1e-3, hold_s=0.1, timeout_s=0.5)
-    ctx = dec.CreateDefaultContext()
-    plan_port, status_port = dec.GetInputPort("lcmt_robot_state"), dec.GetInputPort("lcmt_panda_status")
-    plan_port.FixValue(ctx, AbstractValue.Make(encode_plan(NOW, [0.5, 0, 0.1, 0.2, 0, 0], [0, 0, 3])))
-    status_port.FixValue(ctx, AbstractValue.Make(_status(NOW)))
-    assert dec.GetOutputPort("plan.ok").Eval(ctx)[0] == 0.0          # nothing taken yet
-    state = dec.EvalUniquePeriodicDiscreteUpdate(ctx)
-    ctx.SetDiscreteState(state)
-    for age_ms, ok, vx, fz in ((10, 1.0, 0.2, 3.0), (150, 1.0, 0.0, 0.0), (600, 0.0, 0.0, 0.0)):
-        status_port.FixValue(ctx, AbstractValue.Make(_status(NOW + 1000 * age_ms)))
-        assert dec.GetOutputPort("plan.ok").Eval(ctx)[0] == ok
-        desired = dec.GetOutputPort("ee.desired_state").Eval(ctx)
+def test_plan_hold_holds_then_gives_up():
+    hold = PlanHold(hold_s=0.1, timeout_s=0.5)
+    assert hold.target(NOW)[2] is False                             # nothing taken yet
+    hold.take(encode_plan(NOW, [0.5, 0, 0.1, 0.2, 0, 0], [0, 0, 3]))
+    hold.take(encode_plan(NOW, [9, 9, 9, 9, 9, 9], [9, 9, 9]))       # same utime: a repeat
+    bad = encode_plan(NOW + 1, np.zeros(6), np.zeros(3))
+    bad.joint_name = ["x"] * 9
+    hold.take(bad)
+    assert hold.counts() == {"plans_used": 1, "plans_ignored": 1}
+    for age_ms, ok, vx, fz in ((10, True, 0.2, 3.0), (150, True, 0.0, 0.0), (600, False, 0.0, 0.0)):
+        desired, ff, got_ok = hold.target(NOW + 1000 * age_ms)
+        assert got_ok is ok
         # (lcmt_robot_state carries float32: compare to its precision)
         assert desired[0] == pytest.approx(0.5) and desired[3] == pytest.approx(vx)  # held
-        assert dec.GetOutputPort("ee.feedforward_force").Eval(ctx)[2] == pytest.approx(fz)
+        assert ff[2] == pytest.approx(fz)
 
 
-def test_torque_gate_zeroes_unless_plan_and_robot_mode_allow():
+def _ready_tick(s):
+    """An ImpedanceTick with a fresh plan 3 cm beside the arm's q_null tip."""
+    from adaptive_c3.tools.hardware.impedance_tick import ImpedanceTick
+    tick = ImpedanceTick(s, rate_limit=float("inf"))
+    x = np.r_[tick.law.q_null, np.zeros(7)]
+    tip = tick.law.tip_state(x)
+    tick.plan.take(encode_plan(NOW, np.r_[tip[:3] + [0.03, 0, 0], 0, 0, 0], [0, 0, 0]))
+    return tick
+
+
+def _arm_status(s, utime, mode=None, q=None):
     from drake import lcmt_panda_status
-    gate = TorqueGate()
-    ctx = gate.CreateDefaultContext()
-    gate.GetInputPort("panda.torque_request").FixValue(ctx, np.ones(7))
-    for ok, mode, expect in ((1.0, lcmt_panda_status.kMove, 1.0), (1.0, lcmt_panda_status.kIdle, 1.0),
-                             (0.0, lcmt_panda_status.kMove, 0.0),
-                             (1.0, lcmt_panda_status.kReflex, 0.0),
-                             (1.0, lcmt_panda_status.kGuiding, 0.0)):
-        gate.GetInputPort("plan.ok").FixValue(ctx, [ok])
-        gate.GetInputPort("lcmt_panda_status").FixValue(ctx, AbstractValue.Make(_status(NOW, mode)))
-        assert np.all(gate.get_output_port().Eval(ctx) == expect)
+
+    from adaptive_c3.tools.hardware.status_sender import status_message
+    q = np.asarray(s.impedance.q_null, float) if q is None else q
+    return status_message(utime, q, np.zeros(7), np.zeros(7),
+                          lcmt_panda_status.kMove if mode is None else mode)
+
+
+@pytest.mark.parametrize("mode, moves", [("kMove", True), ("kIdle", True), ("kReflex", False),
+                                         ("kGuiding", False), ("kUserStopped", False)])
+def test_impedance_tick_commands_only_in_move_or_idle(mode, moves):
+    from drake import lcmt_panda_status
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    tick = _ready_tick(s)
+    assert tick.step(0.0, None) is None                      # no status: nothing to stamp
+    cmd = tick.step(1e-3, _arm_status(s, NOW + 1000, getattr(lcmt_panda_status, mode)))
+    assert cmd.utime == NOW + 1000 and cmd.num_joint_torque == 7
+    assert cmd.control_mode_expected == lcmt_panda_status.CONTROL_MODE_TORQUE
+    assert (max(abs(t) for t in cmd.joint_torque) > 0.1) is moves
+
+
+def test_impedance_tick_stale_plan_then_stale_status_end_in_zero_torque():
+    """Plan older than the timeout -> zero at once; status older than the stale limit
+    -> zero within that limit; a non-finite status latches the stop."""
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    tick = _ready_tick(s)
+
+    def torque(t, utime, **kw):
+        return max(abs(v) for v in tick.step(t, _arm_status(s, utime, **kw)).joint_torque)
+    assert torque(0.001, NOW + 1000) > 0.1
+    assert torque(0.002, NOW + 400_000) > 0                  # held at rest, still commanded
+    assert torque(0.003, NOW + 501_000) == 0.0               # plan timed out
+    tick = _ready_tick(s)
+    status = _arm_status(s, NOW + 1000)
+    torques = [max(abs(v) for v in tick.step(1e-3 * k, status).joint_torque)
+               for k in range(1, 80)]                        # the same status again and again
+    assert torques[0] > 0.1 and torques[48] > 0.1 and torques[53] == 0.0
+    assert tick.report()["watchdog"]["mode"] == "stale"
+    q = np.asarray(s.impedance.q_null, float).copy()
+    q[2] = np.nan
+    assert torque(0.1, NOW + 2000, q=q) == 0.0
+    assert torque(0.101, NOW + 3000) == 0.0 and tick.report()["watchdog"]["latched"]
 
 
 @pytest.mark.slow
@@ -182,42 +221,53 @@ def test_planner_starts_from_the_robots_first_status():
     assert target_offset(sims[1]) > 0.05
 
 
-def test_status_driven_loop_ticks_per_status_and_zeroes_on_silence():
+def test_impedance_process_ticks_per_status_and_zeroes_on_silence():
     """The impedance loop runs one tick per PANDA_STATUS and, when the statuses stop,
-    goes on ticking on the clock: its watchdog zeroes the torque after the stale limit."""
-    from drake import lcmt_panda_command, lcmt_panda_status
+    goes on ticking on the clock: its watchdog zeroes the torque after the stale limit.
+    Garbage on the status channel is counted and dropped."""
+    from drake import lcmt_panda_command
     from pydrake.lcm import DrakeLcm
 
-    from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
-    from adaptive_c3.tools.hardware.realtime import run_status_driven
-    from adaptive_c3.tools.hardware.status_sender import status_message
+    from adaptive_c3.tools.hardware.impedance_process import ImpedanceProcess
     s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
     lcm = DrakeLcm("memq://")
-    proc = build_impedance_process(s, lcm, stale_s=0.05)
+    proc = ImpedanceProcess(s, lcm, stale_s=0.05)
     clock = {"t": 0.0, "calls": 0}
     commands = []
     lcm.Subscribe("PANDA_COMMAND", lambda d: commands.append(lcmt_panda_command.decode(d)))
-
-    def status(utime):
-        q = np.asarray(s.impedance.q_null, float)
-        return status_message(utime, q, np.zeros(7), np.zeros(7), lcmt_panda_status.kMove)
 
     def handle():                # 200 statuses 1 ms apart, then silence
         clock["calls"] += 1
         clock["t"] += 1e-3
         if clock["calls"] <= 200:
-            lcm.Publish("PANDA_STATUS", status(NOW + 1000 * clock["calls"]).encode())
+            lcm.Publish("PANDA_STATUS", _arm_status(s, NOW + 1000 * clock["calls"]).encode())
+        elif clock["calls"] == 201:
+            lcm.Publish("PANDA_STATUS", b"not a status")
         lcm.HandleSubscriptions(0)
-    ctx, _, driven, tick_ms = run_status_driven(proc.diagram, lcm, "PANDA_STATUS", 0.4, "test",
-                                       clock=lambda: clock["t"], handle=handle)
-    assert driven == 200
+    r = proc.run(0.4, clock=lambda: clock["t"], handle=handle)
+    # (the first status ends the wait for it and shares the first tick with the second)
+    assert r["status_ticks"] == 199 and r["undecodable_messages"] == 1
     # the fake clock moves 1 ms per call: a tick per status, an idle tick at the first
     # reading >= 1 ms after the last (float rounding can make that the second)
-    assert tick_ms["p50"] == pytest.approx(1.0) and tick_ms["max"] <= 2.0 + 1e-9
+    assert r["tick_period_ms"]["p50"] == pytest.approx(1.0) and r["tick_period_ms"]["max"] <= 2.0 + 1e-9
     assert commands and all(c.utime <= NOW + 200_000 for c in commands)
-    report = proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx))
-    assert report["mode"] == "stale" and report["counts"]["stale"] > 100
+    assert r["watchdog"]["mode"] == "stale" and r["watchdog"]["counts"]["stale"] > 100
     assert max(abs(t) for t in commands[-1].joint_torque) == 0.0
+
+
+def test_impedance_process_waits_for_the_first_status():
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.tools.hardware.first_messages import FirstMessagesTimeout
+    from adaptive_c3.tools.hardware.impedance_process import ImpedanceProcess
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    proc = ImpedanceProcess(s, DrakeLcm("memq://"))
+    clock = {"t": 0.0}
+
+    def handle():
+        clock["t"] += 0.01
+    with pytest.raises(FirstMessagesTimeout, match="PANDA_STATUS"):
+        proc.run(1.0, wait_s=0.5, clock=lambda: clock["t"], handle=handle)
 
 
 def test_wall_clock_planner_moves_its_warm_start_by_the_elapsed_time():

@@ -69,6 +69,54 @@ class ArmModel:
             self.world, self.world)
 
 
+class ImpedanceLaw:
+    """The law of impedance_law.py evaluated on an arm state: the arm model, the gains,
+    the held orientation and the posture. Framework-free, so that the 1 kHz process can
+    call it without a Drake diagram (tools/hardware/impedance_tick.py)."""
+
+    def __init__(self, gains: ImpedanceGains = ImpedanceGains(), *, ee_rotation=None,
+                 tilt_deg: float = 15.0, q_null=Q_NULL, compensate_coriolis: bool = True,
+                 plant=None):
+        self.gains = gains
+        self.R_des = (tilted_ee_rotation(tilt_deg) if ee_rotation is None
+                      else np.asarray(ee_rotation, float).reshape(3, 3))
+        self.q_null = np.asarray(q_null, float).reshape(NQ)
+        self._coriolis = compensate_coriolis
+        self.arm = ArmModel(plant)
+
+    def torque(self, x, des, f_ff, R_des=None) -> np.ndarray:
+        """(7) N m without gravity for arm state x (14), desired tip state des (6, m and
+        m/s in W) and feed-forward f_ff (3, N); zeros if any input is non-finite."""
+        if not (np.isfinite(x).all() and np.isfinite(des).all() and np.isfinite(f_ff).all()):
+            return np.zeros(NQ)
+        q, v = x[:NQ], x[NQ:]
+        arm = self.arm
+        arm.set_state(q, v)
+        p, R = arm.tip_pose()
+        J = arm.tip_jacobian()
+        M = arm.plant.CalcMassMatrix(arm.context)
+        cor = arm.plant.CalcBiasTerm(arm.context) if self._coriolis else None
+        return impedance_torque(J=J, M=M, p=p, R=R, q=q, v=v, p_des=des[:3], v_des=des[3:],
+                                R_des=self.R_des if R_des is None else R_des, f_ff=f_ff,
+                                q_null=self.q_null, gains=self.gains, coriolis=cor)
+
+    def tip_state(self, x) -> np.ndarray:
+        """(6) tip position (m) and velocity (m/s) in W; NaN for a non-finite state."""
+        if not np.isfinite(x).all():
+            return np.full(6, np.nan)
+        self.arm.set_state(x[:NQ], x[NQ:])
+        p, _ = self.arm.tip_pose()
+        return np.concatenate([p, (self.arm.tip_jacobian() @ x[NQ:])[3:]])
+
+    def commanded_force(self, x, des, f_ff) -> np.ndarray:
+        """(3) N in W: K (p_des - p) + D (v_des - v) + f_ff; zero on non-finite input."""
+        if not (np.isfinite(x).all() and np.isfinite(des).all() and np.isfinite(f_ff).all()):
+            return np.zeros(3)
+        tip, g = self.tip_state(x), self.gains
+        return (g.translational_stiffness * (des[:3] - tip[:3])
+                + g.translational_damping * (des[3:] - tip[3:]) + f_ff)
+
+
 class ImpedanceController(LeafSystem):
     """Cartesian impedance on the EE tip + null-space posture + torque limits."""
 
@@ -76,14 +124,12 @@ class ImpedanceController(LeafSystem):
                  tilt_deg: float = 15.0, q_null=Q_NULL, compensate_coriolis: bool = True,
                  plant=None):
         super().__init__()
-        self._gains = gains
-        self._R_des = (tilted_ee_rotation(tilt_deg) if ee_rotation is None
-                       else np.asarray(ee_rotation, float).reshape(3, 3))
-        self._q_null = np.asarray(q_null, float).reshape(NQ)
-        self._coriolis = compensate_coriolis
         # Internal model (not part of the context: this system has no state, and the
-        # cached plant context is only scratch space for each evaluation).
-        self._arm = ArmModel(plant)
+        # law's plant context is only scratch space for each evaluation).
+        self._law = ImpedanceLaw(gains, ee_rotation=ee_rotation, tilt_deg=tilt_deg,
+                                 q_null=q_null, compensate_coriolis=compensate_coriolis,
+                                 plant=plant)
+        self._arm = self._law.arm
         self._state = self.DeclareVectorInputPort("panda.state", 2 * NQ)
         self._desired = self.DeclareVectorInputPort("ee.desired_state", 6)
         self._ff = self.DeclareVectorInputPort("ee.feedforward_force", 3)
@@ -95,59 +141,31 @@ class ImpedanceController(LeafSystem):
         self.DeclareVectorOutputPort("ee.commanded_force", 3, self._calc_force)
 
     @property
+    def law(self) -> ImpedanceLaw:
+        return self._law
+
+    @property
     def desired_rotation(self) -> np.ndarray:
-        return self._R_des.copy()
+        return self._law.R_des.copy()
+
+    def _ff_value(self, context):
+        return self._ff.Eval(context) if self._ff.HasValue(context) else np.zeros(3)
 
     def _calc_torque(self, context, output):
-        x = self._state.Eval(context)
-        des = self._desired.Eval(context)
-        f_ff = self._ff.Eval(context) if self._ff.HasValue(context) else np.zeros(3)
-        R_des = self._R_des
-        ok = (np.all(np.isfinite(x)) and np.all(np.isfinite(des))
-              and np.all(np.isfinite(f_ff)))
-        if ok and self._orient.HasValue(context):
+        R_des = None
+        if self._orient.HasValue(context):
             quat = self._orient.Eval(context)
-            ok = bool(np.all(np.isfinite(quat)) and np.linalg.norm(quat) > 1e-6)
-            if ok:
-                R_des = quaternion_to_rotation(quat)
-        if not ok:
-            output.SetFromVector(np.zeros(NQ))
-            return
-        q, v = x[:NQ], x[NQ:]
-        arm = self._arm
-        arm.set_state(q, v)
-        p, R = arm.tip_pose()
-        J = arm.tip_jacobian()
-        M = arm.plant.CalcMassMatrix(arm.context)
-        cor = arm.plant.CalcBiasTerm(arm.context) if self._coriolis else None
-        tau = impedance_torque(J=J, M=M, p=p, R=R, q=q, v=v, p_des=des[:3],
-                               v_des=des[3:], R_des=R_des, f_ff=f_ff,
-                               q_null=self._q_null, gains=self._gains, coriolis=cor)
-        output.SetFromVector(tau)
+            if not (np.all(np.isfinite(quat)) and np.linalg.norm(quat) > 1e-6):
+                output.SetFromVector(np.zeros(NQ))
+                return
+            R_des = quaternion_to_rotation(quat)
+        output.SetFromVector(self._law.torque(self._state.Eval(context),
+                                              self._desired.Eval(context),
+                                              self._ff_value(context), R_des))
 
     def _calc_force(self, context, output):
-        x = self._state.Eval(context)
-        des = self._desired.Eval(context)
-        f_ff = self._ff.Eval(context) if self._ff.HasValue(context) else np.zeros(3)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(des))
-                and np.all(np.isfinite(f_ff))):
-            output.SetFromVector(np.zeros(3))
-            return
-        arm = self._arm
-        arm.set_state(x[:NQ], x[NQ:])
-        p, _ = arm.tip_pose()
-        v = (arm.tip_jacobian() @ x[NQ:])[3:]
-        g = self._gains
-        output.SetFromVector(g.translational_stiffness * (des[:3] - p)
-                             + g.translational_damping * (des[3:] - v) + f_ff)
+        output.SetFromVector(self._law.commanded_force(
+            self._state.Eval(context), self._desired.Eval(context), self._ff_value(context)))
 
     def _calc_ee_state(self, context, output):
-        x = self._state.Eval(context)
-        if not np.all(np.isfinite(x)):
-            output.SetFromVector(np.full(6, np.nan))
-            return
-        arm = self._arm
-        arm.set_state(x[:NQ], x[NQ:])
-        p, _ = arm.tip_pose()
-        v = (arm.tip_jacobian() @ x[NQ:])[3:]
-        output.SetFromVector(np.concatenate([p, v]))
+        output.SetFromVector(self._law.tip_state(self._state.Eval(context)))

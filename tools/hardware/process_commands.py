@@ -10,23 +10,19 @@ import time
 
 
 def cmd_impedance(args) -> int:
-    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_status_driven
-    from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
-    from adaptive_c3.tools.hardware.lcm_channels import STATUS_CHANNEL, open_lcm
+    from adaptive_c3.tools.hardware.impedance_process import ImpedanceProcess
+    from adaptive_c3.tools.hardware.lcm_channels import open_lcm
+    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario
     from adaptive_c3.tools.hardware.realtime_priority import request_fifo
     s, _, duration = load_hardware_scenario(args)
     lcm = open_lcm(args.lcm_url)
     scheduling = request_fifo(args.rt_priority)
-    proc = build_impedance_process(s, lcm, command_period=args.period,
-                                   stale_s=args.stale_ms * 1e-3)
-    ctx, wall, driven, tick_ms = run_status_driven(
-        proc.diagram, lcm, STATUS_CHANNEL, duration,
-        f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}",
-        tick_s=args.period, wait_for=(lcm, [STATUS_CHANNEL]), wait_s=args.wait_s)
-    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(), "status_ticks": driven, "tick_period_ms": tick_ms,
-           "scheduling": scheduling,
-           "watchdog": proc.watchdog.report(proc.watchdog.GetMyContextFromRoot(ctx)),
-           **proc.plan.counts(proc.plan.GetMyContextFromRoot(ctx))}
+    proc = ImpedanceProcess(s, lcm, stale_s=args.stale_ms * 1e-3)
+    print(f"impedance: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND on {args.lcm_url}"
+          + (f" for {duration:g} s" if duration else "; Ctrl-C to stop")
+          + "; one tick per PANDA_STATUS; waiting for PANDA_STATUS ...", flush=True)
+    out = proc.run(duration, tick_s=args.period, wait_s=args.wait_s)
+    out.update(cpu_s=time.process_time(), scheduling=scheduling)
     print(json.dumps(out, default=float), flush=True)
     return 0
 

@@ -5,8 +5,6 @@ from __future__ import annotations
 import math
 import time
 
-import numpy as np
-
 
 def load_hardware_scenario(args):
     """(scenario, YAML text, duration or None) for the hardware commands, flags checked."""
@@ -71,50 +69,3 @@ def run_realtime(diagram, duration, label: str, on_stop=None, wait_for=None, on_
         if on_stop:
             on_stop()
     return sim.get_context(), time.perf_counter() - start
-
-
-def run_status_driven(diagram, lcm, channel: str, duration, label: str, *,
-                      tick_s: float = 1e-3, wait_for=None, clock=time.monotonic,
-                      handle=None, wait_s: float = 10.0):
-    """Advance `diagram` one tick (tick_s of diagram time) per new message on `channel`,
-    or per tick_s of wall clock without one; returns (context, wall s, ticks driven by
-    a message, tick period stats in ms: p50, p99, max, measured by the loop itself).
-
-    The 1 kHz loop of a real Franka controller runs once per robot status (libfranka's
-    callback; dairlib's LcmDrivenLoop): each status is answered at once from its own
-    state, with no pacing clock of ours between them. A tick absorbs the message
-    (the subscribers' update at the tick's start), runs the controller's periodic
-    updates and publishes the command from the new status within the same AdvanceTo.
-    Without a status the loop still ticks on the wall clock, so the watchdog sees the
-    silence and zeroes the torque after its stale limit. clock (s) and handle() (default
-    lcm.HandleSubscriptions(1): returns on a message or after 1 ms) are injectable for
-    tests."""
-    sim = _started_simulator(diagram, wait_for, wait_s)
-    fresh = [0]
-
-    def on_message(_data):
-        fresh[0] += 1
-    lcm.Subscribe(channel, on_message)
-    print(label + (f" for {duration:g} s" if duration else "; Ctrl-C to stop")
-          + f"; one tick per {channel}", flush=True)
-    handle = handle or (lambda: lcm.HandleSubscriptions(1))
-    start = last = clock()
-    k = driven = 0
-    ticks = np.empty(int(duration / tick_s * 1.5) + 10 if duration else 1_000_000)
-    try:
-        while duration is None or last - start < duration:
-            handle()
-            now = clock()
-            if not fresh[0] and now - last < tick_s:
-                continue
-            driven += fresh[0] > 0
-            fresh[0], last, k = 0, now, k + 1
-            if k <= ticks.size:
-                ticks[k - 1] = now
-            sim.AdvanceTo(k * tick_s)
-    except KeyboardInterrupt:
-        pass
-    periods = 1e3 * np.diff(ticks[:min(k, ticks.size)])
-    stats = ({"p50": float(np.median(periods)), "p99": float(np.percentile(periods, 99)),
-              "max": float(periods.max())} if periods.size else {})
-    return sim.get_context(), clock() - start, driven, stats

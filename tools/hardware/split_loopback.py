@@ -18,28 +18,27 @@ def run_split_loopback(s, duration: float, *, step: float = 1e-3, low_pass_hz: f
 
     from adaptive_c3.tools.hardware.first_messages import (initialise_from_messages,
                                                                wait_for_channels)
-    from adaptive_c3.tools.hardware.impedance_process import build_impedance_process
+    from adaptive_c3.tools.hardware.impedance_process import ImpedanceProcess
     from adaptive_c3.tools.hardware.lcm_channels import BALL_CHANNEL, STATUS_CHANNEL
     from adaptive_c3.tools.hardware.planner_process import build_planner_process
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
     lcm = DrakeLcm("memq://")
     drv = build_sim_driver(s, lcm, low_pass_hz=low_pass_hz)
     planner = build_planner_process(s, lcm, delay_s=delay_s, transport_s=step)
-    imp = build_impedance_process(s, lcm, stale_s=stale_s)
-    sims = [Simulator(d) for d in (drv.diagram, planner.diagram, imp.diagram)]
+    imp = ImpedanceProcess(s, lcm, stale_s=stale_s)
+    sims = [Simulator(d) for d in (drv.diagram, planner.diagram)]
     sims[0].Initialize()                # publishes the first status and ball estimate
     wait_for_channels(lcm, [STATUS_CHANNEL, BALL_CHANNEL],
                       pump=lambda: lcm.HandleSubscriptions(0), timeout_s=0.0)
-    for sim in sims[1:]:
-        initialise_from_messages(sim)
+    initialise_from_messages(sims[1])
     wall = time.perf_counter()
     for k in range(1, int(round(duration / step)) + 1):
         for sim in sims:
             sim.AdvanceTo(k * step)
+        lcm.HandleSubscriptions(0)
+        imp.step(k * step)
     wall = time.perf_counter() - wall
-    ctx_i = sims[2].get_context()
     return {"sim_duration_s": duration, "wall_s": wall,
             "driver": driver_summary(drv, sims[0].get_context()),
-            "watchdog": imp.watchdog.report(imp.watchdog.GetMyContextFromRoot(ctx_i)),
-            **imp.plan.counts(imp.plan.GetMyContextFromRoot(ctx_i)),
+            **imp.tick.report(),
             "_": {"driver": drv, "planner": planner, "impedance": imp, "sims": sims}}

@@ -17,6 +17,19 @@ from pydrake.systems.framework import LeafSystem
 NQ = 7
 
 
+def arm_state_from_status(msg, fallback) -> np.ndarray:
+    """(14) q, v of a PANDA_STATUS message, or `fallback` when it is empty or its 7 + 7
+    values are not all finite."""
+    if msg.num_joints == NQ:
+        try:
+            cand = np.array([*msg.joint_position, *msg.joint_velocity], float)
+        except (TypeError, ValueError):
+            cand = None
+        if cand is not None and cand.shape == (2 * NQ,) and np.all(np.isfinite(cand)):
+            return cand
+    return fallback
+
+
 class StatusArmState(LeafSystem):
     def __init__(self, fallback):
         super().__init__()
@@ -27,13 +40,4 @@ class StatusArmState(LeafSystem):
         self.DeclareVectorOutputPort("panda.state", 2 * NQ, self._calc)
 
     def _calc(self, context, output):
-        msg = self._in.Eval(context)
-        x = self._fb
-        if msg.num_joints == NQ:
-            try:
-                cand = np.array([*msg.joint_position, *msg.joint_velocity], float)
-            except (TypeError, ValueError):
-                cand = None
-            if cand is not None and cand.shape == (2 * NQ,) and np.all(np.isfinite(cand)):
-                x = cand
-        output.SetFromVector(x)
+        output.SetFromVector(arm_state_from_status(self._in.Eval(context), self._fb))

@@ -20,6 +20,19 @@ from pydrake.systems.framework import LeafSystem
 NQ = 7
 
 
+def torque_command_message(tau, utime: int):
+    """lcmt_panda_command in torque mode: tau (7, N m, without gravity), stamped utime."""
+    from drake import lcmt_panda_command, lcmt_panda_status
+    msg = lcmt_panda_command()
+    msg.utime = int(utime)
+    msg.control_mode_expected = lcmt_panda_status.CONTROL_MODE_TORQUE
+    msg.num_joint_position = 0
+    msg.num_joint_velocity = 0
+    msg.num_joint_torque = NQ
+    msg.joint_torque = [float(v) for v in tau]
+    return msg
+
+
 class TorqueCommandSender(LeafSystem):
     def __init__(self):
         super().__init__()
@@ -32,12 +45,5 @@ class TorqueCommandSender(LeafSystem):
                                        self._calc)
 
     def _calc(self, context, output):
-        from drake import lcmt_panda_command, lcmt_panda_status
-        msg = lcmt_panda_command()
-        msg.utime = int(self._status.Eval(context).utime)
-        msg.control_mode_expected = lcmt_panda_status.CONTROL_MODE_TORQUE
-        msg.num_joint_position = 0
-        msg.num_joint_velocity = 0
-        msg.num_joint_torque = NQ
-        msg.joint_torque = [float(v) for v in self._tau.Eval(context)]
-        output.set_value(msg)
+        output.set_value(torque_command_message(self._tau.Eval(context),
+                                                self._status.Eval(context).utime))
