@@ -3,7 +3,9 @@
 sim-driver (the true plant with the real driver's rules, real time) + impedance (1 kHz)
 + planner, on udpm on this machine's loopback (`udpm://239.255.76.67:PORT?ttl=0`), the
 ball-rolling scenario with the camera off (the scenario's reference gains, 5 mm radius
-error, adaptation on). A listener in this process records, in the wall clock:
+error, adaptation on). A listener in this process records, in the wall clock, at the
+time the kernel received each message (lcm_wire_listener.py: what the driver's socket
+sees, not when this Python process got round to reading it):
 - every PANDA_COMMAND: its period (row `bridge/command_period_p99_ms`, field `value`,
   with `median_ms` = the p50 and `max_ms`);
 - every EE_PLAN: its age on arrival, wall clock minus the status utime it was planned
@@ -37,12 +39,12 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     """The three processes for `duration` s of wall clock (module doc). planner_nice:
     the planner's nice value (-10: ahead of ordinary work on the machine, behind the
     SCHED_FIFO driver and impedance loop); planner_args: extra planner flags (e.g.
-    --delay-ms). The listener itself runs at SCHED_FIFO 90 when it may, so that its
-    timestamps are not the jitter it measures."""
+    --delay-ms). Messages are timed by the kernel (WireListener); the listener runs at
+    SCHED_FIFO 90 when it may all the same, so that its socket never overflows."""
     from drake import lcmt_robot_state
-    from pydrake.lcm import DrakeLcm
 
     from adaptive_c3.scenarios.schema import load_scenario
+    from adaptive_c3.tools.bench.lcm_wire_listener import WireListener
     from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL, decode_ball_estimate
     from adaptive_c3.tools.run_ball_rolling import circle_progress
     from adaptive_c3.tools.user_input import resolve_scenario_path
@@ -53,28 +55,26 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     args = [scenario, "--lcm-url", url, "--duration", str(duration)]
     for kv in sets:
         args += ["--set", kv]
-    lcm = DrakeLcm(url)
-    cmd_t, cmd_age, plan_age, ball = [], [], [], []
+    wire = WireListener(url)
+    cmd_t, cmd_age, plan_age, ball, status_t = [], [], [], [], []
 
     def utime(data) -> int:
         # an LCM message is an 8-byte fingerprint, then its fields; all three types here
-        # start with int64 utime. Reading just that keeps the listener light (it runs
-        # at SCHED_FIFO 90 and must not be the jitter it measures)
+        # start with int64 utime. Reading just that keeps the listener light
         return struct.unpack_from(">q", data, 8)[0]
 
-    def on_command(d):
-        cmd_t.append(time.monotonic())
-        cmd_age.append(time.time() - 1e-6 * utime(d))
-    lcm.Subscribe("PANDA_COMMAND", on_command)
-    status_t = []
-    lcm.Subscribe("PANDA_STATUS", lambda d: status_t.append(time.monotonic()))
-    lcm.Subscribe(PLAN_CHANNEL, lambda d: plan_age.append(time.time() - 1e-6 * utime(d)))
+    def on_command(arrival, d):
+        cmd_t.append(arrival)
+        cmd_age.append(arrival - 1e-6 * utime(d))
+    wire.subscribe("PANDA_COMMAND", on_command)
+    wire.subscribe("PANDA_STATUS", lambda arrival, d: status_t.append(arrival))
+    wire.subscribe(PLAN_CHANNEL, lambda arrival, d: plan_age.append(arrival - 1e-6 * utime(d)))
 
-    def on_ball(d):
+    def on_ball(arrival, d):
         b = decode_ball_estimate(lcmt_robot_state.decode(d))
         if np.all(np.isfinite(b)):
             ball.append(b[:2])
-    lcm.Subscribe("BALL_ESTIMATE", on_ball)
+    wire.subscribe("BALL_ESTIMATE", on_ball)
     from adaptive_c3.tools.hardware.realtime_priority import freeze_heap, request_fifo
     extra = {"planner": [f"--nice={planner_nice}", *planner_args]}
     listener_scheduling = request_fifo(90)
@@ -103,8 +103,9 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     try:
         deadline = time.monotonic() + duration + 60
         while time.monotonic() < deadline and any(p.poll() is None for p in procs.values()):
-            lcm.HandleSubscriptions(5)
+            wire.handle(0.005)
     finally:
+        wire.close()
         for p in procs.values():
             if p.poll() is None:
                 p.terminate()
