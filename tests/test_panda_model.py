@@ -134,3 +134,39 @@ def test_scene_ball_rests_on_table_and_arm_holds():
              for c in [contacts.point_pair_contact_info(i)
                        for i in range(contacts.num_point_pair_contacts())]}
     assert names == {frozenset(("ball", "world"))}
+
+
+def test_unit_sphere_mesh_is_the_generators_and_close_to_a_sphere():
+    """The Panda's visual spheres are models/unit_sphere.obj scaled (issue 18: fewer
+    triangles to render); the file is what the generator writes, every vertex on the
+    unit sphere, and the silhouette within 1 % of the radius."""
+    import numpy as np
+
+    from adaptive_c3.models.unit_sphere import OBJ_PATH, SEGMENTS, unit_sphere_obj
+    text = OBJ_PATH.read_text()
+    assert text == unit_sphere_obj()
+    v = np.array([[float(a) for a in ln.split()[1:]] for ln in text.splitlines()
+                  if ln.startswith("v ")])
+    assert np.allclose(np.linalg.norm(v, axis=1), 1.0, atol=1e-5)
+    assert 1 - np.cos(np.pi / SEGMENTS) < 0.01
+
+
+def test_panda_visual_spheres_render_as_meshes_of_their_radius():
+    from pydrake.geometry import Mesh, Role, Sphere
+    from pydrake.multibody.plant import MultibodyPlant
+
+    from adaptive_c3.models.ball_rolling_scene import add_panda
+    plant = MultibodyPlant(1e-3)
+    from pydrake.geometry import SceneGraph
+    sg = SceneGraph()
+    plant.RegisterAsSourceForSceneGraph(sg)
+    add_panda(plant)
+    plant.Finalize()
+    insp = sg.model_inspector()
+    shapes = [insp.GetShape(g) for g in insp.GetAllGeometryIds(Role.kPerception)]
+    meshes = [s for s in shapes if isinstance(s, Mesh)]
+    assert len(meshes) == 27 and not any(isinstance(s, Sphere) for s in shapes)
+    assert {round(m.scale3()[0], 4) for m in meshes} >= {0.075, 0.065, 0.0195}
+    # collision geometry stays spheres
+    assert all(isinstance(insp.GetShape(g), Sphere)
+               for g in insp.GetAllGeometryIds(Role.kProximity))

@@ -220,7 +220,9 @@ def _execute(scenario, todo, out: Path, workers: int, cluster):
             yield run_trial(scenario, t, str(out))
     else:
         import multiprocessing as mp
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn")) as pool:
+        from adaptive_c3.tools.process_tuning import tune_allocator
+        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                 initializer=tune_allocator) as pool:
             futures = [pool.submit(run_trial, scenario, t, str(out)) for t in todo]
             for fut in as_completed(futures):
                 yield fut.result()
