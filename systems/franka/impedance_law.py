@@ -156,13 +156,20 @@ def impedance_torque(*, J, M, p, R, q, v, p_des, v_des, R_des, f_ff=None,
     wrench[:3] = g.rotational_stiffness * e_R - g.rotational_damping * V[:3]
     wrench[3:] = (g.translational_stiffness * (p_des - p)
                   + g.translational_damping * (v_des - V[3:]))
-    Lam, Minv_Jt = task_inertia(J, M)
-    if g.operational_space:
-        wrench = Lam @ wrench
-    wrench[3:] += f_ff
+    # Lambda = (J M^-1 J')^-1 is only ever applied to vectors: solves, no inverse
+    Minv_Jt = np.linalg.solve(M, J.T)
+    JMJ = J @ Minv_Jt
+    JMJ.flat[::JMJ.shape[0] + 1] += 1e-8       # the regularisation of task_inertia
     tau_posture = g.nullspace_stiffness * (q_null - q) - g.nullspace_damping * v
+    y = Minv_Jt.T @ tau_posture
+    if g.operational_space:
+        both = np.linalg.solve(JMJ, np.column_stack([wrench, y]))
+        wrench, lam_y = both[:, 0].copy(), both[:, 1]
+    else:
+        lam_y = np.linalg.solve(JMJ, y)
+    wrench[3:] += f_ff
     # N' tau_posture = tau_posture - J' Lambda (J M^-1) tau_posture, without forming N'
-    tau = (J.T @ (wrench - Lam @ (Minv_Jt.T @ tau_posture))) + tau_posture + cor
+    tau = (J.T @ (wrench - lam_y)) + tau_posture + cor
     if not np.all(np.isfinite(tau)):
         return np.zeros(len(q))
     lim = np.asarray(g.torque_limits, float)
