@@ -98,3 +98,29 @@ def test_r_comp_reaches_the_lcs_c3_plans_with():
     np.testing.assert_allclose(with_r.c - base.c, r * scale, atol=1e-12)
     for name in ("A", "B", "D", "d", "E", "F", "H"):
         np.testing.assert_array_equal(getattr(with_r, name), getattr(base, name))
+
+
+def test_camera_renders_a_twin_posed_like_the_plant():
+    """Issue 18: the renderer sits on the camera's own SceneGraph (posed only when the
+    camera renders), not on the plant's, which updates poses every 1 ms step; the twin
+    puts every perception geometry where the plant's SceneGraph has it."""
+    from pydrake.geometry import Role
+    s, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml", ["camera.enabled=true"])
+    h = build_ball_rolling_diagram(s)
+    camera_sg = next(sy for sy in h.diagram.GetSystems()
+                     if sy.get_name() == "camera_scene_graph")
+    assert h.scene_graph.RendererCount() == 0 and camera_sg.RendererCount() == 1
+    ctx = h.diagram.CreateDefaultContext()
+    pc = h.plant.GetMyMutableContextFromRoot(ctx)
+    rng = np.random.default_rng(3)
+    h.plant.SetPositions(pc, h.plant.GetPositions(pc) + 0.1 * rng.standard_normal(
+        h.plant.num_positions()))
+    poses = {}
+    for sg in (h.scene_graph, camera_sg):
+        q = sg.get_query_output_port().Eval(sg.GetMyContextFromRoot(ctx))
+        insp = q.inspector()
+        poses[sg.get_name()] = sorted(
+            (insp.GetName(g), tuple(np.round(q.GetPoseInWorld(g).GetAsMatrix34().ravel(), 12)))
+            for g in insp.GetAllGeometryIds(Role.kPerception))
+    assert len(poses["camera_scene_graph"]) == 44
+    assert poses["camera_scene_graph"] == poses[h.scene_graph.get_name()]
