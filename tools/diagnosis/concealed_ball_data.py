@@ -362,7 +362,8 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
     W = make_windows(clean_rec, result["horizon"])
     fold, keep = result["foldH"], result["spec"].fit_weight > 0
     out = []
-    for models in ({k: result["P0"] for k in result["P1_folds"]}, result["P1_folds"]):
+    P_user = result.get("P_user", result["P0"])
+    for models in ({k: P_user for k in result["P1_folds"]}, result["P1_folds"]):
         err = []
         for k, P in models.items():
             Wk = W.take(fold == k)

@@ -239,7 +239,8 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
     W = make_windows(clean_rec, result["horizon"])
     fold = result["foldH"]
     out = []
-    for models in ({k: result["P0"] for k in result["P1_folds"]}, result["P1_folds"]):
+    P_user = result.get("P_user", result["P0"])
+    for models in ({k: P_user for k in result["P1_folds"]}, result["P1_folds"]):
         err = []
         for k, P in models.items():          # out-of-fold: each part by the others' fit
             Wk = W.take(fold == k)

@@ -208,6 +208,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
+    P_user = P0                            # the model as the user gave it
     nuisance = fit_nuisance(prob)          # e.g. a sensor delay: part of the base model
     base = list(prob.base)
     P0 = patch(spec, base)
@@ -223,7 +224,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                                               none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
-    before = {k: P0 for k in prob.folds}
+    before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
              for k in prob.folds}
     inside1, insideH = in_windows(W1, windows, rec), in_windows(WH, windows, rec)
@@ -239,7 +240,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     return dict(spec=spec, base=base, sigma=sigma, floor=floor, windows=windows, steps=steps,
                 W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
-                P0=P0, P1=P1, P1_folds=after, errors=errors,
+                P0=P0, P_user=P_user, P1=P1, P1_folds=after, errors=errors,
                 contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
                 nuisance=nuisance, fits_free=fits_free,
                 seconds=time.perf_counter() - start)

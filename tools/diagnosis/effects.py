@@ -68,6 +68,7 @@ class EffectDef:
     grid: Callable                # (spec, target) -> 1-D array of trial values
     physical: bool = True
     description: str = ""
+    nuisance_only: bool = False   # fitted only as a nuisance (spec.nuisance), never named
 
 
 def _coord_unit(force: bool, per_velocity: bool):
@@ -99,6 +100,7 @@ _vd_grid, _vd_bounds = _scaled(0.0, 10.0, 0.0, 0.5)
 _cf_grid, _cf_bounds = _scaled(0.0, 5.0, 0.0, 0.3)
 _ef_grid, _ef_bounds = _scaled(0.0, 5.0, 0.0, 0.5, symmetric=True)
 _zero = lambda spec, target: 0.0          # noqa: E731
+CALIBRATION_TOLERANCE = 1e-3              # m: how well a table height or tool radius is known
 _one = lambda spec, target: 1.0           # noqa: E731
 
 
@@ -137,6 +139,12 @@ EFFECTS = {e.name: e for e in [
               description="the input acts later than it is recorded"),
     EffectDef("external_force", "coord", ("force",), _coord_unit(True, False), _zero,
               _ef_bounds, _ef_grid, description="a constant force (a tilt, a spring, a cable)"),
+    EffectDef("calibration_offset", "pair", ("offset",), lambda s, t: "m", _zero,
+              lambda s, t: (-CALIBRATION_TOLERANCE, CALIBRATION_TOLERANCE),
+              lambda s, t: np.linspace(-CALIBRATION_TOLERANCE, CALIBRATION_TOLERANCE, 9),
+              nuisance_only=True,
+              description="a contact surface off by no more than a calibration tolerance "
+                          "(a table height, a tool radius): part of the base model"),
     EffectDef("r_comp", "pairs_all", ("residual",), lambda s, t: "m", _zero,
               lambda s, t: (-0.3, 0.3), lambda s, t: np.linspace(-0.2, 0.2, 41), physical=False,
               description="the paper's additive complementarity residual (catch-all for contact)"),
@@ -182,7 +190,7 @@ def applicable_candidates(spec: SystemSpec) -> tuple[list, dict]:
     cands, skipped = [], dict(spec.not_applicable)
     targets = getattr(spec, "effect_targets", None) or {}
     for name, d in EFFECTS.items():
-        if name in skipped:
+        if name in skipped or d.nuisance_only:
             continue
         if name in targets:
             cands += [Candidate(name, t) for t in targets[name]]
@@ -268,7 +276,7 @@ def patch(spec: SystemSpec, effects) -> Patched:
     rate[:, spec.v_idx] = E[:, spec.q_idx]          # d(gap)/dt = E_q v
     for cand, p in effects:
         name, t = cand.name, cand.target
-        if name == "contact_offset":
+        if name in ("contact_offset", "calibration_offset"):
             c[spec.pair_names.index(t)] += p[0]
         elif name == "r_comp":
             c += np.asarray(p, float)

@@ -139,7 +139,8 @@ class BallSpec(SystemSpec):
         "actuator_delay": np.linspace(0.0, 0.02, 5)})
     # fitted first and kept in the base model when the held-out data support it (the
     # recorded states of another engine / a real robot may lag the recorded inputs)
-    nuisance: tuple = (("actuator_delay", ""),)
+    nuisance: tuple = (("actuator_delay", ""), ("calibration_offset", "ball_table"),
+                       ("calibration_offset", "ee_ball"))
     # rolling resistance, drag and a constant force are also fitted and judged on the
     # windows where the ball rolls or rests without the EE (tools/diagnosis/evidence.py)
     free_ball: bool = True
@@ -308,7 +309,7 @@ def ball_patch(spec: BallSpec, effects) -> BallPatched:
     pairs = list(spec.pair_names)
     for cand, p in effects:
         name, t, v = cand.name, cand.target, np.asarray(p, float)
-        if name == "contact_offset":
+        if name in ("contact_offset", "calibration_offset"):
             delta[pairs.index(t)] += v[0]
         elif name == "r_comp":
             delta += v

@@ -365,12 +365,23 @@ def _choose(fits, equal_rel: float = 0.0):
     return min(equal, key=lambda f: (not f.physical, f.num_params, f.score))
 
 
+def _at_bound(f, c, spec, rel: float = 0.02) -> bool:
+    lo, hi = c.bounds(spec)
+    span = hi - lo
+    return bool(np.any(f.values <= lo + rel * span) or np.any(f.values >= hi - rel * span))
+
+
 def fit_nuisance(prob: Problem) -> list:
     """Fits of the spec's nuisance effects (spec.nuisance: [(name, target)]) that the
-    held-out data support, each then kept in prob.base for everything that follows."""
+    held-out data support, each then kept in prob.base for everything that follows. A
+    nuisance-only effect (a calibration tolerance) fitted at its bound is not kept: the
+    data want more than the tolerance, so it is left to the candidates."""
     kept = []
     for name, target in getattr(prob.spec, "nuisance", ()):
-        f = score_fit(prob, cv_fit(prob, [Candidate(name, target)]), evaluate(prob, None))
+        c = Candidate(name, target)
+        f = score_fit(prob, cv_fit(prob, [c]), evaluate(prob, None))
+        if c.definition().nuisance_only and _at_bound(f, c, prob.spec):
+            continue    # the data want more than the tolerance: an effect, not calibration
         if f.significant:
             prob.base = list(prob.base) + f.effects(prob.spec)
             kept.append(f)

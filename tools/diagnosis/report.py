@@ -14,17 +14,44 @@ from adaptive_c3.tools.diagnosis.locate import LAG
 PLOT_ROLLOUT_STEPS = 40
 
 
-def _params(fit, spec):
+def _params(fit, spec, shift=None):
+    """The fit's effects as report rows. shift {pair: m}: calibration offsets fitted as
+    nuisance, added to a contact_offset / r_comp of the same pair (whose value is then
+    the offset from the user's model)."""
     out, i = [], 0
     for c in fit.cands:
         p = c.num_params(spec)
         names, units = c.param_names(spec), c.units(spec)
+        pairs = (spec.pair_names if c.name == "r_comp" else [c.target] * p)
+        add = [(shift or {}).get(pairs[j], 0.0) if c.name in ("contact_offset", "r_comp")
+               else 0.0 for j in range(p)]
         out.append(dict(
             name=c.name, target=c.target,
-            params=[dict(name=names[j], value=float(fit.values[i + j]), unit=units[j],
-                         ci95=[float(fit.ci[i + j, 0]), float(fit.ci[i + j, 1])],
+            params=[dict(name=names[j], value=float(fit.values[i + j]) + add[j], unit=units[j],
+                         ci95=[float(fit.ci[i + j, 0]) + add[j],
+                               float(fit.ci[i + j, 1]) + add[j]],
                          sd=float(fit.sd[i + j])) for j in range(p)]))
         i += p
+    return out
+
+
+NUISANCE_NOTES = {
+    "": "fitted first and kept in the model for every candidate",
+    "actuator_delay": "fitted first and kept in the model for every candidate (the "
+                      "recorded states lag the recorded inputs)",
+    "calibration_offset": "fitted first (within +-0.5 mm: how well a table height or tool "
+                          "radius is known) and kept in the model for every candidate; a "
+                          "selected contact_offset of the same pair includes it",
+}
+
+
+def calibration_shift(result) -> dict:
+    """{pair: m}: the calibration offsets kept as nuisance (see _params)."""
+    out = {}
+    for f in result.get("nuisance", []):
+        for c, v in zip(f.cands, f.values):
+            if c.name == "calibration_offset":
+                out[c.target] = out.get(c.target, 0.0) + float(v)
     return out
 
 
@@ -52,7 +79,7 @@ def selected_rows(result) -> list:
     if chosen is None:
         return [{"name": "none"}]
     out = []
-    for e in _params(chosen, result["spec"]):
+    for e in _params(chosen, result["spec"], calibration_shift(result)):
         e["held_out_error"] = dict(normalised_rms=float(np.sqrt(chosen.test_ssr / chosen.test_n)),
                                    ssr_reduction=float(chosen.reduction))
         e["penalty_score"] = float(chosen.score)
@@ -170,7 +197,7 @@ def _plots(out: Path, rec, result) -> list:
         fig, ax = plt.subplots(n, len(starts), figsize=(4 * len(starts), 2.0 * n), squeeze=False)
         for j, (row, length, fold) in enumerate(starts):
             x0, U, Xr, tt = _segment(rec, row, length)
-            for tag, P, style in (("original model", result["P0"], "r--"),
+            for tag, P, style in (("original model", result.get("P_user", result["P0"]), "r--"),
                                   ("patched model (fitted without this part)",
                                    result["P1_folds"][fold], "b-")):
                 X, _ = rollout(P, x0[None], U[None], length, LAG, np.array([row]))
@@ -284,8 +311,7 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
                           for c, p in result["base"]
                           if all(c not in f.cands for f in result.get("nuisance", []))],
         nuisance=[dict(_params(f, spec)[0], ssr_reduction=float(f.reduction),
-                       note="fitted first and kept in the model for every candidate "
-                            "(the recorded states lag the recorded inputs)")
+                       note=NUISANCE_NOTES.get(f.cands[0].name, NUISANCE_NOTES[""]))
                   for f in result.get("nuisance", [])],
         noise_floor={n: float(s) for n, s in zip(spec.state_names, result["sigma"])},
         mismatch_windows=result["windows"],
