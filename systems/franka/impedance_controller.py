@@ -129,7 +129,6 @@ class ImpedanceController(LeafSystem):
         self._law = ImpedanceLaw(gains, ee_rotation=ee_rotation, tilt_deg=tilt_deg,
                                  q_null=q_null, compensate_coriolis=compensate_coriolis,
                                  plant=plant)
-        self._arm = self._law.arm
         self._state = self.DeclareVectorInputPort("panda.state", 2 * NQ)
         self._desired = self.DeclareVectorInputPort("ee.desired_state", 6)
         self._ff = self.DeclareVectorInputPort("ee.feedforward_force", 3)
