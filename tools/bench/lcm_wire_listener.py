@@ -14,7 +14,6 @@ message's own encoding (fingerprint first). Fragmented packets ("LC03") are skip
 """
 from __future__ import annotations
 
-import re
 import select
 import socket
 import struct
@@ -25,10 +24,11 @@ _SO_TIMESTAMPNS = getattr(socket, "SO_TIMESTAMPNS", 35)   # Linux; SCM_TIMESTAMP
 
 class WireListener:
     def __init__(self, url: str):
-        m = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
-        if not m:
+        from adaptive_c3.tools.hardware.lcm_channels import parse_udpm_url
+        parsed = parse_udpm_url(url)
+        if parsed is None:
             raise ValueError(f"WireListener needs a udpm:// URL, got '{url}'")
-        group, port = m.group(1), int(m.group(2))
+        group, port = parsed
         self._sock = s = socket.socket(socket.AF_INET, socket.SOCK_DGRAM, socket.IPPROTO_UDP)
         s.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         if hasattr(socket, "SO_REUSEPORT"):

@@ -55,6 +55,19 @@ def decode_ball_estimate(msg) -> np.ndarray:
     return np.full(6, np.nan)
 
 
+def parse_udpm_url(url: str):
+    """(multicast group, port) of a udpm://GROUP:PORT[?options] URL, None if it is not one."""
+    import ipaddress
+    import re
+    m = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
+    try:
+        if m and ipaddress.ip_address(m.group(1)).is_multicast and 0 < int(m.group(2)) < 65536:
+            return m.group(1), int(m.group(2))
+    except ValueError:
+        pass
+    return None
+
+
 def open_lcm(url: str):
     """A DrakeLcm on `url`, or a UserError for a URL LCM cannot open."""
     from pydrake.lcm import DrakeLcm
@@ -66,16 +79,8 @@ def open_lcm(url: str):
     provider = url.split("://", 1)[0]
     if provider not in ("udpm", "memq"):
         raise UserError(f"bad --lcm-url '{url}': unknown LCM provider '{provider}'")
-    if provider == "udpm":
-        import ipaddress
-        import re
-        m = re.fullmatch(r"udpm://([0-9.]+):(\d+)(\?.*)?", url)
-        try:
-            ok = bool(m) and ipaddress.ip_address(m.group(1)).is_multicast and 0 < int(m.group(2)) < 65536
-        except ValueError:
-            ok = False
-        if not ok:
-            raise UserError(f"bad --lcm-url '{url}': expected udpm://MULTICAST_IP:PORT[?ttl=N]")
+    if provider == "udpm" and parse_udpm_url(url) is None:
+        raise UserError(f"bad --lcm-url '{url}': expected udpm://MULTICAST_IP:PORT[?ttl=N]")
     try:
         lcm = DrakeLcm(url)
     except Exception as e:
