@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.effects import EFFECTS, rollout
+from adaptive_c3.tools.diagnosis.effects import CALIBRATION_TOLERANCE, EFFECTS, rollout
 from adaptive_c3.tools.diagnosis.locate import LAG
 
 PLOT_ROLLOUT_STEPS = 40
@@ -39,9 +39,10 @@ NUISANCE_NOTES = {
     "": "fitted first and kept in the model for every candidate",
     "actuator_delay": "fitted first and kept in the model for every candidate (the "
                       "recorded states lag the recorded inputs)",
-    "calibration_offset": "fitted first (within +-0.5 mm: how well a table height or tool "
-                          "radius is known) and kept in the model for every candidate; a "
-                          "selected contact_offset of the same pair includes it",
+    "calibration_offset": f"fitted first (within +-{1e3 * CALIBRATION_TOLERANCE:g} mm: how "
+                          "well a table height or tool radius is known) and kept in the "
+                          "model for every candidate; a selected contact_offset of the same "
+                          "pair includes it",
 }
 
 
