@@ -182,15 +182,20 @@ def _add_camera_scene_graph(builder, plant, add_scene):
     needs the poses), and with the renderer there a step cost 90 us instead of 9 us
     (measured on this diagram): a renderer's share paid at 1 kHz for a camera at 80 Hz.
     The twin's poses are computed only when the camera evaluates its query port, so
-    only at the camera's rate. Same geometry, same poses: the same image."""
+    only at the camera's rate. Same geometry, same poses: the same image. Each body's
+    visual pieces of one colour are drawn as one mesh (merged_visuals.py: the renderer's
+    cost is per piece, and the Panda has 42)."""
     from pydrake.geometry import SceneGraph
     from pydrake.multibody.plant import MultibodyPlant
     from pydrake.systems.rendering import MultibodyPositionToGeometryPose
+
+    from adaptive_c3.systems.perception.merged_visuals import merge_body_visuals
     camera_sg = builder.AddSystem(SceneGraph())
     camera_sg.set_name("camera_scene_graph")
     twin = MultibodyPlant(plant.time_step())
     twin.RegisterAsSourceForSceneGraph(camera_sg)
     add_scene(twin)
+    merge_body_visuals(twin, camera_sg)
     twin.Finalize()
     if twin.num_multibody_states() != plant.num_multibody_states():
         raise RuntimeError("the camera's twin of the plant has another state layout")

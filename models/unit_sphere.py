@@ -16,35 +16,14 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
-
 SEGMENTS = 24
 OBJ_PATH = Path(__file__).with_name("unit_sphere.obj")
 
 
 def unit_sphere_obj(segments: int = SEGMENTS) -> str:
-    rings = segments // 2
-    verts = [(0.0, 0.0, 1.0)]
-    for i in range(1, rings):
-        phi = np.pi * i / rings
-        for j in range(segments):
-            th = 2 * np.pi * j / segments
-            verts.append((np.sin(phi) * np.cos(th), np.sin(phi) * np.sin(th), np.cos(phi)))
-    verts.append((0.0, 0.0, -1.0))
-    faces = [(1, 2 + j, 2 + (j + 1) % segments) for j in range(segments)]
-    for i in range(rings - 2):
-        a, b = 2 + i * segments, 2 + (i + 1) * segments
-        for j in range(segments):
-            k = (j + 1) % segments
-            faces += [(a + j, b + j, b + k), (a + j, b + k, a + k)]
-    a, last = 2 + (rings - 2) * segments, len(verts)
-    faces += [(a + j, last, a + (j + 1) % segments) for j in range(segments)]
-    lines = [f"# unit sphere, {segments} x {rings} UV, written by "
-             "`python -m adaptive_c3.models.unit_sphere`"]
-    lines += ["v %.6f %.6f %.6f" % v for v in verts]
-    lines += ["vn %.6f %.6f %.6f" % v for v in verts]
-    lines += ["f %d//%d %d//%d %d//%d" % (a, a, b, b, c, c) for a, b, c in faces]
-    return "\n".join(lines) + "\n"
+    from adaptive_c3.systems.perception.merged_visuals import obj_text, uv_sphere
+    return (f"# unit sphere, {segments} x {segments // 2} UV, written by "
+            "`python -m adaptive_c3.models.unit_sphere`\n" + obj_text(uv_sphere(1.0, segments)))
 
 
 if __name__ == "__main__":

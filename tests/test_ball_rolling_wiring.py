@@ -102,9 +102,12 @@ def test_r_comp_reaches_the_lcs_c3_plans_with():
 
 def test_camera_renders_a_twin_posed_like_the_plant():
     """Issue 18: the renderer sits on the camera's own SceneGraph (posed only when the
-    camera renders), not on the plant's, which updates poses every 1 ms step; the twin
-    puts every perception geometry where the plant's SceneGraph has it."""
+    camera renders), not on the plant's, which updates poses every 1 ms step. The twin
+    draws each body's pieces of one colour as one mesh, and the triangles it renders are
+    the plant's perception geometry's, where the plant's SceneGraph puts them."""
     from pydrake.geometry import Role
+
+    from adaptive_c3.systems.perception.merged_visuals import shape_triangles
     s, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml", ["camera.enabled=true"])
     h = build_ball_rolling_diagram(s)
     camera_sg = next(sy for sy in h.diagram.GetSystems()
@@ -115,12 +118,24 @@ def test_camera_renders_a_twin_posed_like_the_plant():
     rng = np.random.default_rng(3)
     h.plant.SetPositions(pc, h.plant.GetPositions(pc) + 0.1 * rng.standard_normal(
         h.plant.num_positions()))
-    poses = {}
+    triangles, counts = {}, {}
     for sg in (h.scene_graph, camera_sg):
         q = sg.get_query_output_port().Eval(sg.GetMyContextFromRoot(ctx))
         insp = q.inspector()
-        poses[sg.get_name()] = sorted(
-            (insp.GetName(g), tuple(np.round(q.GetPoseInWorld(g).GetAsMatrix34().ravel(), 12)))
-            for g in insp.GetAllGeometryIds(Role.kPerception))
-    assert len(poses["camera_scene_graph"]) == 44
-    assert poses["camera_scene_graph"] == poses[h.scene_graph.get_name()]
+        ids = insp.GetAllGeometryIds(Role.kPerception)
+        counts[sg.get_name()] = len(ids)
+        world = []
+        for g in ids:
+            X = q.GetPoseInWorld(g)
+            t = shape_triangles(insp.GetShape(g)).transformed(X.rotation().matrix(),
+                                                               X.translation())
+            # each triangle as its 3 vertices in a canonical (sorted) order
+            world += [np.array(sorted(map(tuple, t.V[f]))).ravel() for f in t.F]
+        triangles[sg.get_name()] = np.array(world)
+    assert counts[h.scene_graph.get_name()] == 44 and counts["camera_scene_graph"] == 12
+    from scipy.spatial import cKDTree
+    a, b = triangles["camera_scene_graph"], triangles[h.scene_graph.get_name()]
+    assert a.shape == b.shape
+    for x, y in ((a, b), (b, a)):       # every triangle has a twin within 1 um
+        dist, _ = cKDTree(y).query(x)
+        assert dist.max() < 1e-6
