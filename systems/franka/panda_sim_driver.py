@@ -16,6 +16,8 @@ Ports:
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from pydrake.systems.framework import LeafSystem
 
@@ -49,12 +51,12 @@ class GravityCompensatedDriver(LeafSystem):
     def _calc(self, context, output):
         cmd = self._cmd.Eval(context)
         q = self._state.Eval(context)[:NQ]
-        if not np.all(np.isfinite(q)):
+        if not math.isfinite(q @ q):          # x'x: finite iff every entry is
             output.SetFromVector(np.zeros(NQ))
             return
-        if not np.all(np.isfinite(cmd)):
+        if not math.isfinite(cmd @ cmd):
             cmd = np.zeros(NQ)      # like the robot: hold against gravity only
         tau = cmd + self.gravity_compensation(q)
         if self._clip:
-            tau = np.clip(tau, -TAU_MAX, TAU_MAX)
+            tau = np.minimum(np.maximum(tau, -TAU_MAX), TAU_MAX)
         output.SetFromVector(tau)
