@@ -8,13 +8,31 @@ page fault that zeroes a page: 8 % of a camera frame's time in the kernel (perf)
 with `bench loop` on 2 cores: real-time factor camera on 0.88 -> 1.01, camera off 2.08 ->
 2.23. The cost is a process that keeps its peak heap (tens of MB here).
 
+`limit_blas_threads()`: OpenBLAS (numpy's and scipy's, two libraries) starts a worker
+per core, and its idle workers spin and yield between calls. Every matrix in the loop is
+tiny (at most 19 x 19 and the C3 KKT), so the workers never help; perf put 4.5 % of the
+camera-off loop in their spin (`blas_thread_server`). One thread each: the loop 1.5 %
+faster and the second core left to the renderer, a sweep worker or the bridge's other
+processes. Set before numpy loads (the CLI calls it first); a value the user exported
+is kept.
+
+`frozen_heap()`: a context in which the objects alive when it starts are out of the
+cyclic garbage collector's sight (gc.freeze), so that its full collections walk only
+what the simulation makes: with pydrake and the built diagram loaded each one walked
+~72,000 objects (tools/hardware/realtime_priority.py). 2 % of the camera-off loop in
+perf. The objects are handed back when it ends (gc.unfreeze), so a sweep worker that
+builds one diagram a trial does not keep them all.
+
 The renderer's setting lives with the camera (systems/perception/camera.py,
-LP_NUM_THREADS). Both change speed only, never what is simulated.
+LP_NUM_THREADS). All of these change speed only, never what is simulated.
 """
 from __future__ import annotations
 
 import ctypes
 import ctypes.util
+import gc
+import os
+from contextlib import contextmanager
 
 M_TRIM_THRESHOLD, M_MMAP_THRESHOLD = -1, -3
 
@@ -29,3 +47,21 @@ def tune_allocator(mmap_threshold: int = 256 << 20, trim_threshold: int = 512 <<
     mallopt.argtypes, mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
     return bool(mallopt(M_MMAP_THRESHOLD, mmap_threshold)) and bool(
         mallopt(M_TRIM_THRESHOLD, trim_threshold))
+
+
+def limit_blas_threads() -> None:
+    """One OpenBLAS thread unless the user chose (see above); takes effect only if
+    numpy/scipy are not loaded yet."""
+    os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+
+@contextmanager
+def frozen_heap():
+    """The objects alive now are left out of the garbage collector's walks until the
+    context ends (see above)."""
+    gc.collect()
+    gc.freeze()
+    try:
+        yield
+    finally:
+        gc.unfreeze()

@@ -16,6 +16,7 @@ from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram, contro
 from adaptive_c3.models.ball_rolling_controller_model import BALL_POS, INPUT_NAMES, STATE_NAMES
 from adaptive_c3.models.ball_rolling_scene import TABLE_CENTER_XY, TABLE_SIZE, TABLE_TOP_Z
 from adaptive_c3.systems.rolling.gait import PHASES
+from adaptive_c3.tools.process_tuning import frozen_heap
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
 
@@ -31,13 +32,14 @@ def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
     simulator.Initialize()
     T = scenario.sim_duration_s
     bar = Progress(T, f"ball rolling [{scenario.name}]", enabled=None if progress else False)
-    start = time.perf_counter()
-    t, chunk = 0.0, max(T / 100, 0.05)
-    while t < T - 1e-12:
-        t = min(t + chunk, T)
-        simulator.AdvanceTo(t)
-        bar.update(t)
-    wall = time.perf_counter() - start
+    with frozen_heap():
+        start = time.perf_counter()
+        t, chunk = 0.0, max(T / 100, 0.05)
+        while t < T - 1e-12:
+            t = min(t + chunk, T)
+            simulator.AdvanceTo(t)
+            bar.update(t)
+        wall = time.perf_counter() - start
     bar.close()
     logs = {}
     for name, sink in handles.logs.items():
