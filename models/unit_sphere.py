@@ -21,7 +21,7 @@ OBJ_PATH = Path(__file__).with_name("unit_sphere.obj")
 
 
 def unit_sphere_obj(segments: int = SEGMENTS) -> str:
-    from adaptive_c3.systems.perception.merged_visuals import obj_text, uv_sphere
+    from adaptive_c3.models.triangle_mesh import obj_text, uv_sphere
     return (f"# unit sphere, {segments} x {segments // 2} UV, written by "
             "`python -m adaptive_c3.models.unit_sphere`\n" + obj_text(uv_sphere(1.0, segments)))
 

@@ -3,15 +3,16 @@ every triangle; a body's pieces become one mesh per colour (issue 18)."""
 import numpy as np
 import pytest
 
+from adaptive_c3.models import triangle_mesh as tm
 from adaptive_c3.systems.perception import merged_visuals as mv
 
 
-def _volume(t: mv.Triangles) -> float:
+def _volume(t: tm.Triangles) -> float:
     a, b, c = t.V[t.F[:, 0]], t.V[t.F[:, 1]], t.V[t.F[:, 2]]
     return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6)
 
 
-def _normals_outward(t: mv.Triangles) -> bool:
+def _normals_outward(t: tm.Triangles) -> bool:
     a, b, c = t.V[t.F[:, 0]], t.V[t.F[:, 1]], t.V[t.F[:, 2]]
     face_n = np.cross(b - a, c - a)
     vertex_n = t.N[t.F[:, 0]] + t.N[t.F[:, 1]] + t.N[t.F[:, 2]]
@@ -19,9 +20,9 @@ def _normals_outward(t: mv.Triangles) -> bool:
 
 
 @pytest.mark.parametrize("shape, volume, rtol", [
-    (mv.uv_sphere(0.5, 24), 4 / 3 * np.pi * 0.125, 0.03),
-    (mv.cylinder(0.2, 0.7, 48), np.pi * 0.04 * 0.7, 0.005),
-    (mv.box([0.1, 0.2, 0.3]), 0.006, 1e-12),
+    (tm.uv_sphere(0.5, 24), 4 / 3 * np.pi * 0.125, 0.03),
+    (tm.cylinder(0.2, 0.7, 48), np.pi * 0.04 * 0.7, 0.005),
+    (tm.box([0.1, 0.2, 0.3]), 0.006, 1e-12),
 ])
 def test_tessellations_are_closed_outward_and_the_right_size(shape, volume, rtol):
     assert _volume(shape) == pytest.approx(volume, rel=rtol)
@@ -34,10 +35,10 @@ def test_tessellations_are_closed_outward_and_the_right_size(shape, volume, rtol
 
 
 def test_obj_round_trip_and_merge_keep_every_triangle():
-    parts = [mv.uv_sphere(0.1, 8), mv.box([1, 1, 1]).transformed(np.eye(3), np.array([2.0, 0, 0]))]
-    merged = mv.merge(parts)
+    parts = [tm.uv_sphere(0.1, 8), tm.box([1, 1, 1]).transformed(np.eye(3), np.array([2.0, 0, 0]))]
+    merged = tm.merge(parts)
     assert len(merged.F) == sum(len(p.F) for p in parts)
-    back = mv.read_obj(mv.obj_text(merged))
+    back = tm.read_obj(tm.obj_text(merged))
     assert len(back.V) == len(merged.V) and len(back.F) == len(merged.F)
     assert np.allclose(back.V[back.F], merged.V[merged.F], atol=1e-6)     # same corners
     assert np.allclose(back.N[back.F], merged.N[merged.F], atol=1e-6)
@@ -46,9 +47,9 @@ def test_obj_round_trip_and_merge_keep_every_triangle():
 
 def test_read_obj_rejects_what_it_cannot_draw():
     with pytest.raises(ValueError, match="triangular"):
-        mv.read_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n")
+        tm.read_obj("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nvn 0 0 1\nf 1//1 2//1 3//1 4//1\n")
     with pytest.raises(ValueError, match="normals"):
-        mv.read_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+        tm.read_obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
 
 
 def test_a_body_s_pieces_become_one_mesh_per_colour():

@@ -92,7 +92,7 @@ class C3Controller(LeafSystem):
         lcs = self._lcs_port.Eval(context)
         target = (np.asarray(self._target_port.Eval(context), float)
                   if self._target_port.HasValue(context) else np.zeros(self._n))
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(target))
+        if not (np.isfinite(x).all() and np.isfinite(target).all()
                 and self._valid_lcs(lcs)):
             self.rejected += 1
             u_vec.SetFromVector(np.zeros(self._k))
@@ -107,7 +107,7 @@ class C3Controller(LeafSystem):
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             sol = None
         self._solve_times.append(time.perf_counter() - t0)
-        if sol is None or not np.all(np.isfinite(sol.u0)):
+        if sol is None or not np.isfinite(sol.u0).all():
             self.rejected += 1
             u_vec.SetFromVector(np.zeros(self._k))
             return EventStatus.Succeeded()

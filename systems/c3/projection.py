@@ -258,7 +258,7 @@ class ExactProjector:
         if m > 10:
             raise ValueError(f"exact projection enumerates 3^m faces; m = {m} > 10")
         w = np.asarray(U_diag, float).reshape(-1)[: n + m + k].copy()
-        if w.shape != (n + m + k,) or np.any(w < 0) or not np.all(np.isfinite(w)):
+        if w.shape != (n + m + k,) or np.any(w < 0) or not np.isfinite(w).all():
             raise ValueError("exact projection needs n+m+k finite, non-negative U weights")
         w = np.where(w > 0, w, _ZERO_WEIGHT_FLOOR * max(float(w.max()), 1.0))
         self.n, self.m, self.k = n, m, k
@@ -306,7 +306,7 @@ class ExactProjector:
             better = dist2[rows, f] < best
             best = np.where(better, dist2[rows, f], best)
             best_s[better] = s[rows[better], f[better]]
-        if not np.all(np.isfinite(best)):
+        if not np.isfinite(best).all():
             raise RuntimeError("exact projection found no feasible face (inconsistent LCS?)")
         out = y.copy()
         out[..., :nz] = (Y + best_s * self._isw).reshape(shape[:-1] + (nz,))

@@ -260,7 +260,7 @@ class OsqpQp:
         # conditions itself.
         A, lo, hi = self._A_lo_hi
         x_start = np.asarray(res.x, float)
-        if not np.all(np.isfinite(x_start)):
+        if not np.isfinite(x_start).all():
             x_start = np.zeros_like(x_start)
         v, ok = refine_active_set(H, g, A, lo, hi, x_start, 10.0 * self.eps,
                                   self.refine_iter)

@@ -64,7 +64,7 @@ def _matrix(name, value, shape=None) -> np.ndarray:
         raise ValueError(f"C3 option {name} must be a square matrix, got shape {arr.shape}")
     if shape is not None and arr.shape != shape:
         raise ValueError(f"C3 option {name} has shape {arr.shape}, expected {shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise ValueError(f"C3 option {name} has non-finite entries")
     if not np.allclose(arr, arr.T, atol=1e-9 * (1.0 + np.abs(arr).max())):
         raise ValueError(f"C3 option {name} must be symmetric")
@@ -158,7 +158,7 @@ class C3Options:
             if arr.ndim not in (1, 2) or arr.shape[-1] <= n + k:
                 raise ValueError(f"C3 option {name} must be a diagonal over [x, lam, u] "
                                  f"(more than n+k = {n + k} entries), got shape {arr.shape}")
-            if not np.all(np.isfinite(arr)) or np.any(arr < 0):
+            if not np.isfinite(arr).all() or np.any(arr < 0):
                 raise ValueError(f"C3 option {name} weights must be finite and >= 0")
             setattr(self, name, arr)
         rho = self.rho_scale
@@ -326,7 +326,7 @@ class C3Solver:
             return c[2]
         try:
             QN = scipy.linalg.solve_discrete_are(lcs.A, lcs.B, o.Q, o.R)
-            if not np.all(np.isfinite(QN)):
+            if not np.isfinite(QN).all():
                 raise np.linalg.LinAlgError("non-finite Riccati solution")
             QN = 0.5 * (QN + QN.T)
         except (np.linalg.LinAlgError, ValueError) as exc:
@@ -435,14 +435,14 @@ class C3Solver:
             raise ValueError(f"LCS has n={n}, k={k}; the C3 options are for "
                              f"n={o.num_states}, k={o.num_inputs}")
         x0 = np.asarray(x0, float).reshape(-1)
-        if x0.shape != (n,) or not np.all(np.isfinite(x0)):
+        if x0.shape != (n,) or not np.isfinite(x0).all():
             raise ValueError(f"x0 must be {n} finite numbers")
         if x_target is None:
             xt = np.zeros((N + 1, n))
         else:
             xt = np.asarray(x_target, float)
             xt = np.broadcast_to(xt, (N + 1, n)) if xt.shape == (n,) else xt
-            if xt.shape != (N + 1, n) or not np.all(np.isfinite(xt)):
+            if xt.shape != (N + 1, n) or not np.isfinite(xt).all():
                 raise ValueError(f"x_target must be {n} or [{N + 1}, {n}] finite numbers")
         G, U = self.weights(s0)
         c3plus = o.projection == "c3plus"

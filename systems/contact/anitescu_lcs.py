@@ -180,7 +180,7 @@ class AnitescuLinearizer:
             raise ValueError(f"x has {x.size} entries, the plant has {self.nx} states")
         if u.shape != (self.nu,):
             raise ValueError(f"u has {u.size} entries, the plant has {self.nu} inputs")
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(u))):
+        if not (np.isfinite(x).all() and np.isfinite(u).all()):
             raise ValueError("x and u must be finite")
         return x, u
 

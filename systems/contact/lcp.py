@@ -192,7 +192,7 @@ def _basis_resolve(M: np.ndarray, q: np.ndarray, z: np.ndarray) -> np.ndarray | 
             za = _solve_small(M[np.ix_(a, a)], -q[a])
         except np.linalg.LinAlgError:
             return None
-        if not np.all(np.isfinite(za)):
+        if not np.isfinite(za).all():
             return None
         out[a] = np.maximum(za, 0.0)
     return out
@@ -347,7 +347,7 @@ def solve_lcp_enumeration(M, q, tol: float = 1e-9) -> LcpResult:
                 za = np.linalg.solve(sub, rhs)
             except np.linalg.LinAlgError:
                 za = np.linalg.lstsq(sub, rhs, rcond=None)[0]
-            if not np.all(np.isfinite(za)):
+            if not np.isfinite(za).all():
                 continue
             z[idx] = za
         thresh = tol * _scale(M, q, z)

@@ -28,7 +28,7 @@ def _frozen(name: str, value, ndim: int) -> np.ndarray:
     arr = np.array(value, dtype=float, copy=True)
     if arr.ndim != ndim:
         raise LcsError(f"LCS matrix {name} must be {ndim}-D, got shape {arr.shape}")
-    if not np.all(np.isfinite(arr)):
+    if not np.isfinite(arr).all():
         raise LcsError(f"LCS matrix {name} has non-finite entries")
     arr.flags.writeable = False
     return arr
@@ -139,7 +139,7 @@ class Lcs:
         arr = np.asarray(v, dtype=float).reshape(-1)
         if arr.shape != (size,):
             raise LcsError(f"{name} has {arr.size} entries, the LCS expects {size}")
-        if not np.all(np.isfinite(arr)):
+        if not np.isfinite(arr).all():
             raise LcsError(f"{name} has non-finite entries")
         return arr
 

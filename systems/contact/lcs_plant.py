@@ -41,7 +41,7 @@ class LcsPlant(LeafSystem):
     def _step(self, context, discrete_state):
         x = context.get_discrete_state(self._x).get_value()
         u = self.get_input_port(0).Eval(context)
-        if not np.all(np.isfinite(u)):
+        if not np.isfinite(u).all():
             self.bad_inputs += 1
             u = np.zeros_like(u)
         if self.get_input_port(1).HasValue(context):

@@ -76,7 +76,7 @@ class DriverRules:
                 f"num_joint_velocity={msg.num_joint_velocity}, num_joint_torque="
                 f"{msg.num_joint_torque}; the driver needs 0, 0, {NQ}")
         tau = np.asarray(msg.joint_torque, float)
-        if tau.shape != (NQ,) or not np.all(np.isfinite(tau)):
+        if tau.shape != (NQ,) or not np.isfinite(tau).all():
             raise DriverContractError("torque command with non-finite or missing torques")
         return tau
 

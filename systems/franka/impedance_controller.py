@@ -157,7 +157,7 @@ class ImpedanceController(LeafSystem):
         R_des = None
         if self._orient.HasValue(context):
             quat = self._orient.Eval(context)
-            if not (np.all(np.isfinite(quat)) and np.linalg.norm(quat) > 1e-6):
+            if not (np.isfinite(quat).all() and np.linalg.norm(quat) > 1e-6):
                 output.SetFromVector(np.zeros(NQ))
                 return
             R_des = quaternion_to_rotation(quat)

@@ -64,7 +64,7 @@ class WatchdogConfig:
 
     def __post_init__(self):
         lim = np.asarray(self.torque_limits, float)
-        if lim.shape != (self.num_joints,) or not np.all(np.isfinite(lim)) or np.any(lim <= 0):
+        if lim.shape != (self.num_joints,) or not np.isfinite(lim).all() or np.any(lim <= 0):
             raise ValueError(f"torque_limits must be {self.num_joints} positive numbers")
         if not (math.isfinite(self.stale_s) and self.stale_s > 0):
             raise ValueError(f"stale_s must be > 0, got {self.stale_s}")
@@ -160,7 +160,7 @@ class WatchdogCore:
             return self._fault(s, t, "malformed",
                                f"status with {status.num_joints} joints, q {np.shape(status.q)},"
                                f" v {np.shape(status.v)}")
-        if not (np.all(np.isfinite(status.q)) and np.all(np.isfinite(status.v))):
+        if not (np.isfinite(status.q).all() and np.isfinite(status.v).all()):
             s.latched = True
             return self._fault(s, t, "nonfinite", "non-finite joint state in the status")
         age = (t - 1e-6 * status.utime) if cfg.use_message_time else (t - s.last_rx_s)
@@ -174,7 +174,7 @@ class WatchdogCore:
         tau = np.asarray(tau_request, float).reshape(-1)
         if tau.shape != (n,):
             return self._fault(s, t, "malformed", f"torque request of size {tau.size}")
-        if not np.all(np.isfinite(tau)):
+        if not np.isfinite(tau).all():
             s.latched = True
             return self._fault(s, t, "nonfinite", "non-finite torque request")
         clipped = np.clip(tau, -self._lim, self._lim)

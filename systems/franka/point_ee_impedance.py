@@ -41,7 +41,7 @@ class PointEeImpedance(LeafSystem):
     def _calc(self, context, out):
         x, des = self._x.Eval(context), self._des.Eval(context)
         ff = self._ff.Eval(context) if self._ff.HasValue(context) else np.zeros(3)
-        if not (np.all(np.isfinite(x)) and np.all(np.isfinite(des)) and np.all(np.isfinite(ff))):
+        if not (np.isfinite(x).all() and np.isfinite(des).all() and np.isfinite(ff).all()):
             out.SetFromVector(np.zeros(3))
             return
         f = self._K * (des[:3] - x[:3]) + self._D * (des[3:] - x[3:]) + ff

@@ -142,7 +142,7 @@ class ResidualLearner(LeafSystem):
         self._Qd = qd_matrix(options.Qd, n)
         check_epsilon(options.epsilon)
         r0 = np.zeros(m) if initial_residual is None else np.asarray(initial_residual, float)
-        if r0.shape != (m,) or not np.all(np.isfinite(r0)):
+        if r0.shape != (m,) or not np.isfinite(r0).all():
             raise ValueError(f"initial_residual must be {m} finite numbers")
 
         # state vector layout

@@ -158,7 +158,7 @@ def qd_matrix(Qd, n: int) -> np.ndarray:
         Q = np.diag(Q)
     elif Q.shape != (n, n):
         raise ValueError(f"learner Qd has shape {Q.shape}, expected ({n}, {n})")
-    if not np.all(np.isfinite(Q)):
+    if not np.isfinite(Q).all():
         raise ValueError("learner Qd has non-finite entries")
     if not np.allclose(Q, Q.T, rtol=1e-12, atol=0.0):
         raise ValueError("learner Qd must be symmetric")
@@ -411,7 +411,7 @@ def adam_update(grad, m1, m2, t: int, options: LearnerOptions, mask=None):
     The step size is options.learning_rate / (1 + t / lr_decay_steps) if that is > 0."""
     grad = np.asarray(grad, float)
     mask = np.ones(grad.shape[0], bool) if mask is None else np.asarray(mask, bool)
-    if not np.all(np.isfinite(grad)):
+    if not np.isfinite(grad).all():
         return np.zeros_like(grad), m1, m2, t
     b1, b2 = options.beta1, options.beta2
     t = int(t) + 1
@@ -444,7 +444,7 @@ def _check_r(r, m) -> np.ndarray:
     r = np.asarray(r, float).reshape(-1)
     if r.shape != (m,):
         raise ValueError(f"residual has {r.size} entries, the LCS has m={m}")
-    if not np.all(np.isfinite(r)):
+    if not np.isfinite(r).all():
         raise ValueError("residual has non-finite entries")
     return r
 

@@ -47,7 +47,7 @@ class BallPoseSensor(LeafSystem):
     def _update(self, context, discrete_state):
         s = self._s(context).copy()
         true = np.asarray(self._in.Eval(context), float)
-        if not np.all(np.isfinite(true)):
+        if not np.isfinite(true).all():
             return   # hold the last estimate
         meas = true[4:7] + self._rng.normal(0.0, self._noise, 3) * (self._noise > 0)
         if s[6] < 0.5:

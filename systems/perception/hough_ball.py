@@ -216,7 +216,7 @@ def tracker_step(x: np.ndarray, t: float, candidates, params: TrackerParams) -> 
     x = np.array(x, float)
     lo, hi = np.asarray(params.workspace_min), np.asarray(params.workspace_max)
     good = [np.asarray(Pw, float) for Pw, ratio in candidates
-            if Pw is not None and np.all(np.isfinite(Pw))
+            if Pw is not None and np.isfinite(Pw).all()
             and abs(ratio - 1.0) <= params.radius_tolerance
             and np.all(Pw[:2] >= lo) and np.all(Pw[:2] <= hi)]
     x[OK] = 0.0

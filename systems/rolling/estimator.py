@@ -30,14 +30,14 @@ def lcs_state(ee_state, ball_position, ball_velocity, model_radius: float) -> np
     p = np.asarray(ball_position, float)
     v = np.asarray(ball_velocity, float)
     x = np.zeros(len(STATE_NAMES))
-    if not (np.all(np.isfinite(ee)) and np.all(np.isfinite(p[:2]))
-            and np.all(np.isfinite(v[:2]))):
+    if not (np.isfinite(ee).all() and np.isfinite(p[:2]).all()
+            and np.isfinite(v[:2]).all()):
         return np.full(len(STATE_NAMES), np.nan)
     x[EE_POS], x[EE_VEL] = ee[:3], ee[3:6]
     x[BALL_QUAT] = [1.0, 0.0, 0.0, 0.0]
     x[BALL_POS] = [p[0], p[1], model_radius]
     x[BALL_VEL] = [v[0], v[1], 0.0]
-    x[BALL_ANGVEL] = np.cross([0.0, 0.0, 1.0], x[BALL_VEL]) / model_radius
+    x[BALL_ANGVEL] = [-v[1] / model_radius, v[0] / model_radius, 0.0]   # z_hat x v / R
     return x
 
 

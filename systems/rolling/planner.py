@@ -112,7 +112,7 @@ class BallRollingPlanner(LeafSystem):
     def _make_output(self, sl):
         def calc(context, out):
             v = context.get_discrete_state(int(self._cmd)).get_value()[sl]
-            if sl.start < 6 and not np.all(np.isfinite(v)):   # before the first tick
+            if sl.start < 6 and not np.isfinite(v).all():   # before the first tick
                 x = self._x_port.Eval(context)
                 v = np.r_[x[EE_POS], np.zeros(3)][sl]
             out.SetFromVector(np.nan_to_num(v))
@@ -122,14 +122,14 @@ class BallRollingPlanner(LeafSystem):
     def _init(self, context, state):
         x = np.asarray(self._x_port.Eval(context), float)
         cmd = np.zeros(15)
-        cmd[0:3] = x[EE_POS] if np.all(np.isfinite(x)) else np.nan
+        cmd[0:3] = x[EE_POS] if np.isfinite(x).all() else np.nan
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
         return EventStatus.Succeeded()
 
     def _residual(self, context) -> np.ndarray:
         if self._r_port.HasValue(context):
             r = np.asarray(self._r_port.Eval(context), float)
-            if np.all(np.isfinite(r)):
+            if np.isfinite(r).all():
                 return r
         return np.zeros(self._m)
 
@@ -139,7 +139,7 @@ class BallRollingPlanner(LeafSystem):
 
     def _hold(self, state, x, reason_phase: float):
         cmd = state.get_mutable_discrete_state(int(self._cmd)).get_value().copy()
-        p = x[EE_POS] if np.all(np.isfinite(x[EE_POS])) else cmd[0:3]
+        p = x[EE_POS] if np.isfinite(x[EE_POS]).all() else cmd[0:3]
         cmd[0:3], cmd[3:12] = p, 0.0
         cmd[12] = reason_phase
         state.get_mutable_discrete_state(int(self._cmd)).set_value(cmd)
@@ -151,7 +151,7 @@ class BallRollingPlanner(LeafSystem):
         lcs, lcs_loop = self._lcs_port.Eval(context), self._loop_port.Eval(context)
         phase, _ = self._gait.phase(t)
         iphase = float(PHASES.index(phase))
-        if not (np.all(np.isfinite(x)) and isinstance(lcs, Lcs) and isinstance(lcs_loop, Lcs)):
+        if not (np.isfinite(x).all() and isinstance(lcs, Lcs) and isinstance(lcs_loop, Lcs)):
             self._hold(state, x, iphase)
             return EventStatus.Succeeded()
         r = self._residual(context)
@@ -183,7 +183,7 @@ class BallRollingPlanner(LeafSystem):
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             sol, x_next = None, None
         self.solve_times.append(time.perf_counter() - t0)
-        if sol is None or not (np.all(np.isfinite(sol.u0)) and np.all(np.isfinite(x_next))):
+        if sol is None or not (np.isfinite(sol.u0).all() and np.isfinite(x_next).all()):
             self._hold(state, x, iphase)
             return EventStatus.Succeeded()
         p_des, v_des = clamp_ee_command(x[EE_POS], x_next[EE_POS], x_next[EE_VEL],
@@ -202,7 +202,7 @@ class BallRollingPlanner(LeafSystem):
         the phase's EE target (target[EE_POS]); no contact force is planned (u0 = the model
         EE's weight)."""
         cmd = state.get_mutable_discrete_state(int(self._cmd)).get_value().copy()
-        start = cmd[0:3] if np.all(np.isfinite(cmd[0:3])) else x[EE_POS]
+        start = cmd[0:3] if np.isfinite(cmd[0:3]).all() else x[EE_POS]
         p_des, v_des = step_toward(start, target[EE_POS], self._gait.s.return_speed,
                                    self.period_s)
         cmd = np.concatenate([p_des, v_des, np.zeros(3), self._ee_weight, [iphase],
