@@ -226,8 +226,8 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv=None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)   # argparse itself exits with code 2 on bad flags
-    from adaptive_c3.tools.process_tuning import limit_blas_threads, tune_allocator
-    limit_blas_threads()
+    from adaptive_c3.tools.process_tuning import limit_library_threads, tune_allocator
+    limit_library_threads()
     tune_allocator()
     try:
         return int(args.func(args) or 0)

@@ -8,13 +8,15 @@ page fault that zeroes a page: 8 % of a camera frame's time in the kernel (perf)
 with `bench loop` on 2 cores: real-time factor camera on 0.88 -> 1.01, camera off 2.08 ->
 2.23. The cost is a process that keeps its peak heap (tens of MB here).
 
-`limit_blas_threads()`: OpenBLAS (numpy's and scipy's, two libraries) starts a worker
-per core, and its idle workers spin and yield between calls. Every matrix in the loop is
-tiny (at most 19 x 19 and the C3 KKT), so the workers never help; perf put 4.5 % of the
-camera-off loop in their spin (`blas_thread_server`). One thread each: the loop 1.5 %
-faster and the second core left to the renderer, a sweep worker or the bridge's other
-processes. Set before numpy loads (the CLI calls it first); a value the user exported
-is kept.
+`limit_library_threads()`: OpenBLAS (numpy's and scipy's, two libraries) starts a
+worker per core, and its idle workers spin and yield between calls. Every matrix in the
+loop is tiny (at most 19 x 19 and the C3 KKT), so the workers never help; perf put 4.5 %
+of the camera-off loop in their spin (`blas_thread_server`). One thread each: the loop
+1.5 % faster and the second core left to the renderer, a sweep worker or the bridge's
+other processes. OpenCV likewise splits the detector's 160 x 120 frame over a thread
+pool whose wake-ups cost more than the split saves (detector 0.80 -> 0.73 ms a frame in
+the loop). Set before the libraries load (the CLI calls it first); a value the user
+exported is kept.
 
 `frozen_heap()`: a context in which the objects alive when it starts are out of the
 cyclic garbage collector's sight (gc.freeze), so that its full collections walk only
@@ -49,10 +51,11 @@ def tune_allocator(mmap_threshold: int = 256 << 20, trim_threshold: int = 512 <<
         mallopt(M_TRIM_THRESHOLD, trim_threshold))
 
 
-def limit_blas_threads() -> None:
-    """One OpenBLAS thread unless the user chose (see above); takes effect only if
-    numpy/scipy are not loaded yet."""
+def limit_library_threads() -> None:
+    """One OpenBLAS and one OpenCV thread unless the user chose (see above); takes
+    effect only for libraries not loaded yet."""
     os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+    os.environ.setdefault("OPENCV_FOR_THREADS_NUM", "1")
 
 
 @contextmanager

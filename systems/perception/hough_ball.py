@@ -31,16 +31,22 @@ import numpy as np
 # ------------------------------------------------------------------ image side
 def ball_mask(rgb: np.ndarray, target_rgb, hue_tol_deg: float = 20.0,
               min_saturation: float = 0.45, min_value: float = 0.2) -> np.ndarray:
-    """uint8 mask (255 = ball colour) of an RGB(A) uint8 image."""
-    rgb = np.ascontiguousarray(rgb[..., :3])
+    """uint8 mask (255 = ball colour) of an RGB(A) uint8 image: hue within
+    hue_tol_deg / 2 OpenCV hue units (2 degrees each) of the target's, circularly;
+    saturation and value at least the given fractions of 255."""
+    rgb = (cv2.cvtColor(rgb, cv2.COLOR_RGBA2RGB) if rgb.shape[-1] == 4
+           else np.ascontiguousarray(rgb))
     hsv = cv2.cvtColor(rgb, cv2.COLOR_RGB2HSV)
     target = np.uint8([[np.clip(np.asarray(target_rgb[:3], float) * 255, 0, 255)]])
     hue = int(cv2.cvtColor(target, cv2.COLOR_RGB2HSV)[0, 0, 0])   # 0..179 (2 deg)
-    dh = np.abs(hsv[..., 0].astype(np.int16) - hue)
-    dh = np.minimum(dh, 180 - dh)
-    ok = ((dh <= hue_tol_deg / 2.0) & (hsv[..., 1] >= min_saturation * 255)
-          & (hsv[..., 2] >= min_value * 255))
-    return ok.astype(np.uint8) * 255
+    tol = int(np.floor(hue_tol_deg / 2.0))
+    s_min, v_min = int(np.ceil(min_saturation * 255)), int(np.ceil(min_value * 255))
+    # cv2.inRange (inclusive bounds) per hue interval; the hue circle wraps at 180
+    mask = cv2.inRange(hsv, (max(hue - tol, 0), s_min, v_min), (min(hue + tol, 179), 255, 255))
+    for lo, hi in ((hue - tol + 180, 179), (0, hue + tol - 180)):
+        if lo <= hi and (hue - tol < 0 or hue + tol > 179):
+            mask |= cv2.inRange(hsv, (max(lo, 0), s_min, v_min), (min(hi, 179), 255, 255))
+    return mask
 
 
 def fit_circle(points: np.ndarray):
