@@ -189,6 +189,27 @@ def test_rendered_ball_positions_are_recovered(rendered):
     assert det.detect(rendered["empty"]) == []
 
 
+def test_search_window_finds_what_the_whole_frame_finds(rendered):
+    """Issue 18: the detector looks first in the window around the tracker's prediction;
+    for a ball within the gate it finds the same circle as in the whole frame, and a
+    ball outside the window is still found (the whole frame is searched then)."""
+    det = rendered["detector"]
+    for img, P in zip(rendered["images"], rendered["truths"]):
+        full = det.detect(img)
+        for offset in ([0.0, 0.0, 0.0], [0.02, -0.015, 0.0]):     # inside the 3 cm gate
+            window = det._search_window(P + offset, 0.03, img.shape[1], img.shape[0])
+            assert window is not None
+            u0, v0, u1, v1 = window
+            assert (u1 - u0) * (v1 - v0) < 0.35 * img.shape[0] * img.shape[1]
+            near = det.detect(img, near=(P + offset, 0.03))
+            assert len(near) == len(full) == 1
+            np.testing.assert_allclose(near[0][0], full[0][0], atol=1e-12)
+            assert near[0][1] == pytest.approx(full[0][1], abs=1e-12)
+        far = det.detect(img, near=(P + [0.2, 0.0, 0.0], 0.03))      # window misses it
+        np.testing.assert_allclose(far[0][0], full[0][0], atol=1e-12)
+    assert det.detect(rendered["empty"], near=(rendered["truths"][0], 0.03)) == []
+
+
 def _image_value(rgb):
     img = ImageRgba8U(rgb.shape[1], rgb.shape[0])
     img.mutable_data[:, :, :3] = rgb[:, :, :3]

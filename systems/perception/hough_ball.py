@@ -216,6 +216,15 @@ def initial_tracker_state(params: TrackerParams, position_xy=(0.55, 0.0)) -> np.
     return x
 
 
+def tracker_prediction(x: np.ndarray, t: float, params: TrackerParams):
+    """(predicted centre P_W (3,), gate radius m) at time t: where tracker_step looks
+    for the ball, or None before the first acquisition (it then looks everywhere)."""
+    if x[INIT] < 0.5:
+        return None
+    dt = t - x[T_MEAS]
+    return x[P] + x[V] * dt, min(params.gate + params.max_speed * dt, params.max_gate)
+
+
 def tracker_step(x: np.ndarray, t: float, candidates, params: TrackerParams) -> np.ndarray:
     """One 80 Hz update. candidates: iterable of (P_W (3,), radius_ratio) where
     radius_ratio = measured / expected pixel radius. Returns the new state."""
@@ -233,8 +242,7 @@ def tracker_step(x: np.ndarray, t: float, candidates, params: TrackerParams) -> 
             x[OK], x[INIT], x[T_MEAS] = 1.0, 1.0, t
     else:
         dt = t - x[T_MEAS]
-        pred = x[P] + x[V] * dt
-        gate = min(params.gate + params.max_speed * dt, params.max_gate)
+        pred, gate = tracker_prediction(x, t, params)
         dist = [np.linalg.norm(c[:2] - pred[:2]) for c in good]
         if dist and min(dist) <= gate and dt > 0:
             z = good[int(np.argmin(dist))]
