@@ -4,8 +4,9 @@ Recipe (world frame W = robot base frame, table top z = 0):
   1. true plant      Panda (or a point EE) + table + ball of the TRUE radius, SAP, 1 ms
   2. robot           impedance controller (1 kHz, the plant step) -> simulated torque
                      driver with gravity compensation -> plant actuation
-  3. ball sensing    overhead RgbdSensor -> Hough BallDetector at 80 Hz, or (camera off)
-                     the true pose plus noise, filtered the same way
+  3. ball sensing    overhead RgbdSensor -> Hough BallDetector at 80 Hz
+                     (ball_rolling_camera.py), or (camera off) the true pose plus noise,
+                     filtered the same way
   4. estimator       EE + ball estimates -> the controller model's 19-state
   5. LCS             Anitescu LCS of the controller model (MODEL radius) at 80 Hz, with
                      the planning dt and with the loop period
@@ -18,7 +19,6 @@ Recipe (world frame W = robot base frame, table top z = 0):
 from __future__ import annotations
 
 import dataclasses as dc
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -30,7 +30,9 @@ from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NA
                                                               ball_rolling_linearizer,
                                                               default_state,
                                                               ee_input_from_motion)
-from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene, add_point_ee
+from adaptive_c3.diagrams.ball_rolling_camera import add_ball_camera
+from adaptive_c3.diagrams.ball_rolling_world import (ball_start_xy, make_gait, start_states,
+                                                     true_radius, true_world)
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
 from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
 from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
@@ -38,7 +40,6 @@ from adaptive_c3.systems.rolling.estimator import BallRollingEstimator
 from adaptive_c3.systems.rolling.planner import BallRollingPlanner
 from adaptive_c3.systems.c3.solver import C3Options
 from adaptive_c3.systems.learning.residual_learner import ResidualLearner
-from adaptive_c3.systems.rolling.gait import CirclePath, GaitSettings, RollingGait
 from adaptive_c3.systems.learning.violation_loss import LearnerOptions
 
 LEARNER_SAMPLE_HZ = 200.0
@@ -59,26 +60,6 @@ class BallRollingDiagram:
     ball_start: np.ndarray  # (3) true start position
     ee_start: np.ndarray    # (3)
     lambda_names: list
-
-
-def true_radius(s: BallRollingScenario) -> float:
-    return s.model.ball_radius - s.model.radius_error
-
-
-def ball_start_xy(s: BallRollingScenario) -> np.ndarray:
-    """Start on the circle at ball_start_angle_deg (from +x about the centre, CCW)."""
-    a = math.radians(s.ball_start_angle_deg)
-    c, r = s.target.center, s.target.radius
-    return np.array([c[0] + r * math.cos(a), c[1] + r * math.sin(a)])
-
-
-def make_gait(s: BallRollingScenario) -> RollingGait:
-    g = s.gait
-    # the schema's Gait carries every GaitSettings field (plus C3's return weight)
-    settings = GaitSettings(**{f.name: getattr(g, f.name) for f in dc.fields(GaitSettings)})
-    path = CirclePath(tuple(s.target.center), s.target.radius, s.target.lead_deg)
-    return RollingGait(settings, path, ball_radius=s.model.ball_radius,
-                       ee_radius=s.model.ee_radius)
 
 
 # The reference system's weights on the 19-state.
@@ -173,55 +154,9 @@ def _add_robot(builder, plant, s, panda, ee_instance):
     return ctrl
 
 
-def _add_camera_scene_graph(builder, plant, add_scene):
-    """A SceneGraph only the camera reads: a twin of the plant's bodies and geometry
-    (add_scene(twin)), posed from the plant's state by MultibodyPositionToGeometryPose.
-
-    A SceneGraph moves every geometry in each of its render engines whenever its poses
-    are updated. On the plant's own SceneGraph that is every 1 ms plant step (contact
-    needs the poses), and with the renderer there a step cost 90 us instead of 9 us
-    (measured on this diagram): a renderer's share paid at 1 kHz for a camera at 80 Hz.
-    The twin's poses are computed only when the camera evaluates its query port, so
-    only at the camera's rate. Same geometry, same poses: the same image. Each body's
-    visual pieces of one colour are drawn as one mesh (merged_visuals.py: the renderer's
-    cost is per piece, and the Panda has 42)."""
-    from pydrake.geometry import SceneGraph
-    from pydrake.multibody.plant import MultibodyPlant
-    from pydrake.systems.rendering import MultibodyPositionToGeometryPose
-
-    from adaptive_c3.systems.perception.merged_visuals import merge_body_visuals
-    camera_sg = builder.AddSystem(SceneGraph())
-    camera_sg.set_name("camera_scene_graph")
-    twin = MultibodyPlant(plant.time_step())
-    twin.RegisterAsSourceForSceneGraph(camera_sg)
-    add_scene(twin)
-    merge_body_visuals(twin, camera_sg)
-    twin.Finalize()
-    if twin.num_multibody_states() != plant.num_multibody_states():
-        raise RuntimeError("the camera's twin of the plant has another state layout")
-    to_pose = builder.AddSystem(MultibodyPositionToGeometryPose(twin, input_multibody_state=True))
-    builder.Connect(plant.get_state_output_port(), to_pose.get_input_port())
-    builder.Connect(to_pose.get_output_port(), camera_sg.get_source_pose_port(twin.get_source_id()))
-    return camera_sg
-
-
-def _add_ball_sensing(builder, plant, add_scene, s, ball_instance, start_xy):
-    """Returns the system with "ball.position" / "ball.velocity" outputs."""
+def _add_ball_pose_sensor(builder, plant, s, ball_instance, start_xy):
+    """Camera off: the true ball pose plus noise, filtered like the detector's estimate."""
     cam = s.camera
-    if cam.enabled:
-        from adaptive_c3.systems.perception.ball_detector import BallDetector
-        from adaptive_c3.systems.perception.camera import add_overhead_camera, overhead_camera_spec
-        spec = overhead_camera_spec(target=(s.target.center[0], s.target.center[1], 0.0),
-                                    width=cam.width, height=cam.height)
-        camera_sg = _add_camera_scene_graph(builder, plant, add_scene)
-        sensor, spec = add_overhead_camera(builder, camera_sg, spec)
-        # The detector back-projects onto the plane z = R_MODEL: it only knows the model.
-        det = builder.AddSystem(BallDetector(spec, ball_radius=s.model.ball_radius,
-                                             period=1.0 / cam.rate_hz,
-                                             initial_position_xy=tuple(start_xy)))
-        builder.Connect(sensor.color_image_output_port(),
-                        det.GetInputPort("camera.color_image"))
-        return det
     sens = builder.AddSystem(BallPoseSensor(
         period=1.0 / cam.rate_hz, noise_m=cam.position_noise_m, alpha=cam.filter_alpha,
         seed=s.seed, initial_position=(start_xy[0], start_xy[1], s.model.ball_radius)))
@@ -354,8 +289,6 @@ def controller_prior(s: BallRollingScenario) -> BallRollingScenario:
 
 def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRollingDiagram:
     s = controller_prior(s)
-    m = s.model
-    R_true = true_radius(s)
     builder = DiagramBuilder()
 
     # 1. true plant
@@ -363,27 +296,11 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
                                   discrete_contact_approximation="sap")
     plant, scene_graph = AddMultibodyPlant(config, builder)
     start_xy = ball_start_xy(s)
-    fruit = None
-    if m.object != "ball":   # a lumpy fruit drawn from the seed; the prior stays a sphere
-        from adaptive_c3.models.fruit import sample_fruit
-        fruit = sample_fruit(m.object, s.seed)
-    gait = make_gait(s)
-    x_start = default_state(tuple(start_xy), ball_radius=m.ball_radius,
-                            ee_radius=m.ee_radius)
-    ee_start = gait.ee_target("settle", x_start)
-
-    def add_scene(p):       # the true world's bodies and geometry, into plant p
-        scene = add_ball_rolling_scene(p, ball_radius=R_true, ball_mass=m.ball_mass,
-                                       ball_position=tuple(start_xy), mu=m.true_friction,
-                                       with_arm=(s.robot == "panda"), fruit=fruit)
-        ee = None
-        if s.robot == "point_ee":
-            ee = add_point_ee(p, radius=m.ee_radius, mass=s.point_ee_mass,
-                              position=ee_start, mu=m.true_friction)
-        return scene, ee
-    scene, ee_instance = add_scene(plant)
+    x_start, ee_start = start_states(s)
+    add_world = true_world(s)
+    scene, ee_instance = add_world(plant)
     plant.Finalize()
-    if fruit is not None:
+    if add_world.fruit is not None:
         from adaptive_c3.models.fruit import make_rigid_hydroelastic
         make_rigid_hydroelastic(plant, scene_graph)
     if scene.panda is not None:
@@ -391,7 +308,10 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
 
     # 2-3. robot, ball sensing; 4-7. the controller
     robot = _add_robot(builder, plant, s, scene.panda, ee_instance)
-    ball_sensor = _add_ball_sensing(builder, plant, add_scene, s, scene.ball, start_xy)
+    if s.camera.enabled:
+        ball_sensor = add_ball_camera(builder, plant, s)
+    else:
+        ball_sensor = _add_ball_pose_sensor(builder, plant, s, scene.ball, start_xy)
     ctrl = add_ball_rolling_controller(
         builder, s, robot.GetOutputPort("ee.state"), robot.GetOutputPort("ee.commanded_force"),
         ball_sensor.GetOutputPort("ball.position"), ball_sensor.GetOutputPort("ball.velocity"),
@@ -420,7 +340,8 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     diagram = builder.Build()
     diagram.set_name(f"ball_rolling[{s.name}]")
     return BallRollingDiagram(diagram, plant, scene_graph, planner, learner, lcs_sys, logs,
-                              scene.ball_radius, np.r_[start_xy, scene.ball_radius], ee_start, ctrl.lambda_names)
+                              scene.ball_radius, np.r_[start_xy, scene.ball_radius], ee_start,
+                              ctrl.lambda_names)
 
 
 def _set_panda_start(plant, panda, ee_start, s):

@@ -197,7 +197,7 @@ def test_search_window_finds_what_the_whole_frame_finds(rendered):
     for img, P in zip(rendered["images"], rendered["truths"]):
         full = det.detect(img)
         for offset in ([0.0, 0.0, 0.0], [0.02, -0.015, 0.0]):     # inside the 3 cm gate
-            window = det._search_window(P + offset, 0.03, img.shape[1], img.shape[0])
+            window = det.finder._search_window(P + offset, 0.03, img.shape[1], img.shape[0])
             assert window is not None
             u0, v0, u1, v1 = window
             assert (u1 - u0) * (v1 - v0) < 0.35 * img.shape[0] * img.shape[1]
