@@ -37,7 +37,8 @@ from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_
                                                 cartpole_spec, patch)
 from adaptive_c3.tools.diagnosis.evidence import (evidence_windows, free_ball_verdict,
                                                  widen_for_phases, window_phases)
-from adaptive_c3.tools.diagnosis.fit import MIN_REDUCTION, Problem, fit_nuisance, select
+from adaptive_c3.tools.diagnosis.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
+                                             widen_for_nuisance)
 from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
                                                make_windows, prediction_floor)
 from adaptive_c3.tools.recording import RecordingError, load_recording
@@ -208,7 +209,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
-    P_user = P0                            # the model as the user gave it
+    P_user, user_base = P0, list(base)     # the model as the user gave it
     nuisance = fit_nuisance(prob)          # e.g. a sensor delay: part of the base model
     base = list(prob.base)
     P0 = patch(spec, base)
@@ -219,6 +220,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION))
     if chosen is not None:
         widen_for_phases(scored, chosen)
+        widen_for_nuisance(prob, chosen, user_base, nuisance)
         Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
                                               none_scored[3] - chosen.test_window_ssr,

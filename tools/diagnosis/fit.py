@@ -19,7 +19,8 @@ with half the rollout horizon (noisy start states bias the fit, the more so the 
 the rollout), sd^2 + shift^2; 95% = +-1.96 sd. For the chosen effect the sd is the
 larger of that and a delete-one-episode jackknife (the sandwich is too narrow when the
 information sits in few events, e.g. contacts), with the Student t quantile for
-(episodes - 1) degrees of freedom.
+(episodes - 1) degrees of freedom; and the shift of the chosen effect when refitted with
+the spec's nuisances free (widen_for_nuisance) is added to its sd.
 
 Selection on the cross-validated SSR: score = N_eff ln(SSR/N) + p ln(N_eff) (BIC-like;
 N_eff = N / horizon, the residuals of one window being correlated). An effect is
@@ -244,6 +245,38 @@ def jackknife(prob: Problem, fit: Fit, groups: int = 8) -> Fit:
     fit.sd = np.sqrt(np.maximum(fit.sd ** 2, sd_jk ** 2 + shift ** 2))
     q = float(student_t.ppf(0.975, G - 1))
     fit.ci = np.stack([fit.values - q * fit.sd, fit.values + q * fit.sd], 1)
+    return fit
+
+
+def widen_for_nuisance(prob: Problem, fit: Fit, user_base: list, kept=()) -> Fit:
+    """Nuisance allowance on the chosen fit's interval: the chosen effect refitted jointly
+    with every nuisance of the spec free, from the user's model (`user_base`, without the
+    nuisances `kept`, whose values start the refit); the shift of the effect's values is
+    added to the interval's sd. A nuisance the held-out data did not pin down (a sensor
+    delay or a calibration below significance) can still pull the estimate, and an
+    interval that leaves it out is too narrow. A calibration of a contact pair that the
+    effect itself offsets (contact_offset, r_comp) is left out: the two are one quantity,
+    and the report gives their sum."""
+    if fit is None:
+        return fit
+    offset_pairs = {c.target for c in fit.cands if c.name == "contact_offset"}
+    if any(c.name == "r_comp" for c in fit.cands):
+        offset_pairs |= set(getattr(prob.spec, "pair_names", ()))
+    start = {f.cands[0]: f.values for f in kept}
+    nuis = [Candidate(n, t) for n, t in getattr(prob.spec, "nuisance", ())
+            if not (n == "calibration_offset" and t in offset_pairs)]
+    nuis = [c for c in nuis if c not in fit.cands]
+    if not nuis:
+        return fit
+    init = np.concatenate([fit.values] + [start.get(c, c.nominal(prob.spec)) for c in nuis])
+    user = Problem(prob.spec, list(user_base), prob.windows, prob.fold, prob.weight,
+                   prob.cluster_steps, prob.min_reduction, prob.min_z)
+    joint = fit_candidates(user, list(fit.cands) + nuis, init=init, ci=False)
+    shift = joint.values[:fit.num_params] - fit.values
+    q = (fit.ci[:, 1] - fit.values) / np.maximum(fit.sd, 1e-300)
+    fit.sd = np.sqrt(fit.sd ** 2 + shift ** 2)
+    fit.ci = np.stack([fit.values - q * fit.sd, fit.values + q * fit.sd], 1)
+    fit.nuisance_shift = shift
     return fit
 
 
