@@ -297,10 +297,9 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     plant, scene_graph = AddMultibodyPlant(config, builder)
     start_xy = ball_start_xy(s)
     x_start, ee_start = start_states(s)
-    add_world = true_world(s)
-    scene, ee_instance = add_world(plant)
+    scene, ee_instance = true_world(s)(plant)
     plant.Finalize()
-    if add_world.fruit is not None:
+    if s.model.object != "ball":      # a fruit: rigid hydroelastic contact
         from adaptive_c3.models.fruit import make_rigid_hydroelastic
         make_rigid_hydroelastic(plant, scene_graph)
     if scene.panda is not None:

@@ -1,6 +1,5 @@
 """The true world of the ball-rolling experiment, from a scenario: what the plant holds
-and where things start. Shared by the simulation's plant, the camera's twin of it (in
-this process or the camera process) and the hardware bridge's simulated driver.
+and where things start. Shared by the simulation's plant and the camera's twin of it.
 """
 from __future__ import annotations
 
@@ -66,5 +65,4 @@ def true_world(s: BallRollingScenario):
             ee = add_point_ee(plant, radius=m.ee_radius, mass=s.point_ee_mass,
                               position=ee_start, mu=m.true_friction)
         return scene, ee
-    add.fruit = fruit
     return add

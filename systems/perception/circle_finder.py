@@ -2,9 +2,8 @@
 into a ball centre in the world and a radius check (numpy + OpenCV, no Drake system).
 
 `CircleFinder` holds what the image-to-world step needs (intrinsics, camera pose, the
-ball's radius and colour, the tracker's settings). BallDetector (in this process) and
-the camera process (camera_process.py, another process) use the same one, so both find
-the same candidates in the same image.
+ball's radius and colour, the tracker's settings); the BallDetector LeafSystem wraps it
+with the tracker.
 """
 from __future__ import annotations
 
