@@ -79,6 +79,10 @@ def test_ball_estimate_layout():
     (["sim-driver", "ball_rolling", "--lcm-url", "nourl"], "bad --lcm-url"),
     (["sim-driver", "ball_rolling", "--lcm-url", "memq://", "--set", "robot=point_ee"],
      "robot: panda"),
+    (["sim-driver", "ball_rolling", "--lcm-url", "memq://", "--set", "model.object=orange"],
+     "model.object: ball"),
+    (["hardware", "ball_rolling", "--loopback", "--duration", "0.1", "--set",
+      "model.object=lime"], "model.object: ball"),
     # no robot on the bus: the controllers give up waiting for its first messages
     (["impedance", "ball_rolling", "--lcm-url", "memq://", "--wait-s", "0.2"],
      "no message on PANDA_STATUS"),
@@ -288,3 +292,21 @@ def test_bridge_survives_nonfinite_and_malformed_messages():
     assert np.all(np.asarray(tau) == 0)
     counts = b.ball.counts(b.ball.GetMyContextFromRoot(ctx))
     assert counts == {"ball_messages": 0, "ball_messages_ignored": 1}
+
+
+def test_sim_driver_world_has_the_true_friction():
+    """The simulated driver's plant is the true world: the ball's contact has
+    model.true_friction, not the controller model's model.friction."""
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.tools.hardware.sim_driver import build_sim_driver
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"),
+                         FAST + ["model.true_friction=0.4", "model.friction=1.0"])
+    drv = build_sim_driver(s, DrakeLcm("memq://"))
+    ctx = drv.diagram.CreateDefaultContext()
+    plant = drv.plant
+    insp = plant.get_geometry_query_input_port().Eval(
+        plant.GetMyContextFromRoot(ctx)).inspector()
+    (gid,) = plant.GetCollisionGeometriesForBody(plant.GetBodyByName("ball"))
+    mu = insp.GetProximityProperties(gid).GetProperty("material", "coulomb_friction")
+    assert mu.static_friction() == 0.4

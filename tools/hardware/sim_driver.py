@@ -99,6 +99,10 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
 
     if s.robot != "panda":
         raise ValueError("the simulated driver needs robot: panda")
+    if s.model.object != "ball":
+        from adaptive_c3.scenarios.schema import ScenarioError
+        raise ScenarioError("the simulated driver simulates a ball (model.object: ball), "
+                            f"got '{s.model.object}'")
     fast_drake_lcm_copies()
     m = s.model
     R_true = true_radius(s)
@@ -107,7 +111,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
         time_step=s.sim_time_step, discrete_contact_approximation="sap"), builder)
     start_xy = ball_start_xy(s)
     scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=m.ball_mass,
-                                   ball_position=tuple(start_xy), mu=m.friction,
+                                   ball_position=tuple(start_xy), mu=m.true_friction,
                                    with_arm=True)
     plant.Finalize()
     x_start = default_state(tuple(start_xy), ball_radius=m.ball_radius,
