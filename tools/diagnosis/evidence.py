@@ -248,14 +248,23 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     Gauss-Newton step, fit.lin) on each phase's windows alone, over the phases holding
     >= min_share of its information (sum of squared sensitivities); their spread (sd) is
     added to the interval's sd. A value that depends on which windows are used is not
-    pinned down by the statistical interval (e.g. a compliant contact read as an offset)."""
+    pinned down by the statistical interval (e.g. a compliant contact read as an offset).
+    The pushes count as two phases, split at their median input force: a compliant
+    contact gives under a firm push an offset (or friction) that a light push does not."""
     from adaptive_c3.tools.diagnosis.fit import linear_refit
     if fit is None or fit.lin is None:
         return fit
-    ph = window_phases(prob.spec, prob.used())
+    W = prob.used()
+    ph = window_phases(prob.spec, W)
+    push = ph == "push"
+    if push.sum() >= 2 * min_windows:   # pushes split at their median input force
+        force = np.linalg.norm(W.U, axis=2).mean(axis=1)
+        firm = force > np.median(force[push])
+        ph = np.where(push & firm, "push_firm", np.where(push, "push_light", ph))
     Jt, shape = fit.lin[1], fit.lin[4]
     info = np.sum(Jt.reshape((len(Jt), shape[0], -1)) ** 2, axis=(0, 2))     # [W]
-    keep = [p for p in ("coast", "rest", "push") if np.sum(ph == p) >= min_windows
+    keep = [p for p in ("coast", "rest", "push", "push_light", "push_firm")
+            if np.sum(ph == p) >= min_windows
             and info[ph == p].sum() >= min_share * info.sum()]
     if len(keep) < 2:
         return fit
