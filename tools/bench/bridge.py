@@ -75,7 +75,8 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
         if np.all(np.isfinite(b)):
             ball.append(b[:2])
     wire.subscribe("BALL_ESTIMATE", on_ball)
-    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap, request_fifo
+    from adaptive_c3.tools.hardware.realtime_priority import request_fifo
+    from adaptive_c3.tools.process_tuning import freeze_heap
     extra = {"planner": [f"--nice={planner_nice}", *planner_args]}
     listener_scheduling = request_fifo(90)
     freeze_heap()

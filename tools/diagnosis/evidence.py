@@ -251,7 +251,7 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     pinned down by the statistical interval (e.g. a compliant contact read as an offset).
     The pushes count as two phases, split at their median input force: a compliant
     contact gives under a firm push an offset (or friction) that a light push does not."""
-    from adaptive_c3.tools.diagnosis.fit import linear_refit
+    from adaptive_c3.tools.diagnosis.fit import add_to_interval, linear_refit
     if fit is None or fit.lin is None:
         return fit
     W = prob.used()
@@ -269,9 +269,6 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     if len(keep) < 2:
         return fit
     est = np.array([linear_refit(fit, keep=ph == p) for p in keep])
-    spread = est.std(axis=0, ddof=1)
-    q = (fit.ci[:, 1] - fit.values) / np.maximum(fit.sd, 1e-300)
-    fit.sd = np.sqrt(fit.sd ** 2 + spread ** 2)
-    fit.ci = np.stack([fit.values - q * fit.sd, fit.values + q * fit.sd], 1)
+    add_to_interval(fit, est.std(axis=0, ddof=1))
     fit.phase_estimates = dict(zip(keep, est.tolist()))
     return fit

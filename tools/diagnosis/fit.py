@@ -272,11 +272,15 @@ def widen_for_nuisance(prob: Problem, fit: Fit, user_base: list, kept=()) -> Fit
     user = Problem(prob.spec, list(user_base), prob.windows, prob.fold, prob.weight,
                    prob.cluster_steps, prob.min_reduction, prob.min_z)
     joint = fit_candidates(user, list(fit.cands) + nuis, init=init, ci=False)
-    shift = joint.values[:fit.num_params] - fit.values
+    return add_to_interval(fit, joint.values[:fit.num_params] - fit.values)
+
+
+def add_to_interval(fit: Fit, allowance: np.ndarray) -> Fit:
+    """The interval widened by an allowance (per value, in the values' units) added to
+    its sd in quadrature, at the interval's present quantile (1.96 or Student t)."""
     q = (fit.ci[:, 1] - fit.values) / np.maximum(fit.sd, 1e-300)
-    fit.sd = np.sqrt(fit.sd ** 2 + shift ** 2)
+    fit.sd = np.sqrt(fit.sd ** 2 + np.asarray(allowance, float) ** 2)
     fit.ci = np.stack([fit.values - q * fit.sd, fit.values + q * fit.sd], 1)
-    fit.nuisance_shift = shift
     return fit
 
 

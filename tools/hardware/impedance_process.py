@@ -69,7 +69,7 @@ class ImpedanceProcess:
         Ctrl-C). handle() (default lcm.HandleSubscriptions(1): returns on a message or
         after 1 ms) is injectable for tests. Returns the run's report."""
         from adaptive_c3.tools.hardware.first_messages import wait_for_channels
-        from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
+        from adaptive_c3.tools.process_tuning import freeze_heap
         handle = handle or (lambda: self.lcm.HandleSubscriptions(1))
         wait_for_channels(self.lcm, [STATUS_CHANNEL], pump=handle, timeout_s=wait_s,
                           clock=clock)

@@ -35,7 +35,7 @@ def _started_simulator(diagram, wait_for, wait_s: float):
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.tools.hardware.first_messages import start_from_first_messages
-    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap
+    from adaptive_c3.tools.process_tuning import freeze_heap
     sim = Simulator(diagram)
     if wait_for is None:
         sim.Initialize()

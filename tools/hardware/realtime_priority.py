@@ -18,7 +18,6 @@ period went from 3 to 217 ms.
 """
 from __future__ import annotations
 
-import gc
 import os
 
 
@@ -45,17 +44,3 @@ def request_nice(nice: int) -> str:
     except (PermissionError, OSError):
         return f"SCHED_OTHER nice {os.getpriority(os.PRIO_PROCESS, 0)} (nice {nice} not permitted)"
     return f"SCHED_OTHER nice {int(nice)}"
-
-
-def freeze_heap() -> None:
-    """Move every object alive now out of the cyclic garbage collector's sight.
-
-    Python's full (generation 2) collection walks every tracked object. With pydrake,
-    the scenario and the built diagram loaded that is about 72,000 objects, and one
-    collection took 43 ms on a quiet core and over 100 ms under load. Python starts
-    such a collection on its own now and then, and it stopped a 1 kHz loop mid-stream:
-    the driver's status had gaps of 110-180 ms. Called once, after start-up and before
-    the loop, it leaves the collector only the loop's own new objects (0.002 ms).
-    """
-    gc.collect()
-    gc.freeze()

@@ -215,7 +215,8 @@ def cmd_sim_driver(args) -> int:
     drv = build_sim_driver(s, lcm, status_period=args.status_period,
                            expire_sec=args.expire_sec, low_pass_hz=args.low_pass_hz,
                            clock=wall_clock_us)
-    from adaptive_c3.tools.hardware.realtime_priority import freeze_heap, request_fifo
+    from adaptive_c3.tools.hardware.realtime_priority import request_fifo
+    from adaptive_c3.tools.process_tuning import freeze_heap
     scheduling = request_fifo(args.rt_priority)
     sim = Simulator(drv.diagram)
     sim.set_target_realtime_rate(1.0)
