@@ -111,6 +111,9 @@ def build_parser() -> argparse.ArgumentParser:
     diag = sub.add_parser("diagnose", help="find where a recording and the model disagree")
     diag.add_argument("recording")
     diag.add_argument("--scenario", required=True)
+    diag.add_argument("--also", action="append", default=[], metavar="RECORDING",
+                      help="more recordings of the same rig (e.g. made with the excitation a "
+                      "report proposed), diagnosed together with RECORDING as more episodes")
     diag.add_argument("--out", default=None)
     diag.add_argument("--baseline", choices=["drake"], default=None,
                       help="rigid_object: also Drake's SAP simulation on the held-out episodes, "

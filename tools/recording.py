@@ -53,6 +53,30 @@ def save_recording(path, rec: Recording) -> Path:
     return path
 
 
+def concat_recordings(recs) -> Recording:
+    """One recording holding every episode of recs in turn (episode ids renumbered so
+    that they stay apart; a recording without ids is one episode). The state and input
+    names must agree; extras are dropped (they need not exist in every recording)."""
+    recs = list(recs)
+    first = recs[0]
+    for r in recs[1:]:
+        if list(r.state_names) != list(first.state_names) or \
+                list(r.input_names) != list(first.input_names):
+            raise RecordingError("recordings to combine must have the same state and input "
+                                 "names")
+    eps, offset = [], 0
+    for r in recs:
+        e = np.zeros(len(r.t), np.int64) if r.episode is None else np.asarray(r.episode)
+        _, ids = np.unique(e, return_inverse=True)
+        eps.append(ids + offset)
+        offset += int(ids.max()) + 1 if len(ids) else 0
+    return Recording(t=np.concatenate([r.t for r in recs]),
+                     x=np.concatenate([r.x for r in recs]),
+                     u=np.concatenate([r.u for r in recs]),
+                     state_names=list(first.state_names), input_names=list(first.input_names),
+                     scenario=first.scenario, episode=np.concatenate(eps))
+
+
 def load_recording(path, allow_nonfinite: bool = False) -> Recording:
     path = Path(path)
     if not path.is_file():

@@ -1,6 +1,6 @@
 """Per-effect hit rates of `diagnose` on concealed ball-rolling draws (issue 19's marks).
 
-    python -m adaptive_c3.tools.diagnosis.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
+    python -m adaptive_c3.tools.diagnosis.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR] [--follow-up]
 
 Each draw (tools/diagnosis/concealed_ball_data.py, with the second-engine variation) is
 diagnosed and scored:
@@ -10,6 +10,10 @@ diagnosed and scored:
   ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
   excess cut     held-out rollout excess-over-noise (noisy data) before / after
   clean cut      the same against the noise-free states (NOISE_STD units)
+--follow-up: on an ambiguous verdict the harness records again with the gait change
+the report proposes (`separating_excitation[].excitation`, as its user would) and
+diagnoses both recordings together; `after_follow_up` scores the draws with that
+second answer where there is one (the first answer elsewhere).
 Writes DIR/ball_hit_rate.json (summary + rows, after every draw) and DIR/ball_hit_rate.png.
 """
 from __future__ import annotations
@@ -27,6 +31,15 @@ TARGETS = dict(named=0.90, none_on_clean=1.0, coverage=0.85, truth_in_ambiguous=
 
 
 def summarise(rows) -> dict:
+    out = _summary(rows)
+    if any("follow_up" in r for r in rows):
+        out["after_follow_up"] = dict(
+            _summary([r.get("follow_up", r) for r in rows]),
+            follow_ups=sum("follow_up" in r for r in rows))
+    return out
+
+
+def _summary(rows) -> dict:
     def rate(rs, key):
         return float(np.mean([bool(r[key]) for r in rs])) if rs else None
     eff = [r for r in rows if r["truth"]["name"] != "none"]
@@ -70,8 +83,13 @@ def plot(summary, path: Path) -> None:
                   fontsize=8)
     ax.axhline(0.9, color="k", lw=0.5, ls="--")
     ax.set_ylim(0, 1.05)
-    ax.set_title(f"diagnose on {summary['draws']} concealed ball draws: named first "
-                 f"{summary['named']:.0%}, coverage {summary['coverage'] or 0:.0%}")
+    title = (f"diagnose on {summary['draws']} concealed ball draws: named first "
+             f"{summary['named']:.0%}, coverage {summary['coverage'] or 0:.0%}")
+    if "after_follow_up" in summary:
+        f = summary["after_follow_up"]
+        title += (f"\nafter {f['follow_ups']} follow-up recordings with the proposed "
+                  f"excitation: named first {f['named']:.0%}, coverage {f['coverage'] or 0:.0%}")
+    ax.set_title(title, fontsize=10)
     ax.legend(fontsize=8)
     fig.tight_layout()
     fig.savefig(path, dpi=110)
@@ -84,17 +102,23 @@ def run(draws: int, first_seed: int, out: Path, **kw) -> dict:
     for s in range(first_seed, first_seed + draws):
         r = score_draw(s, baseline=False, **kw)
         rows.append(r)
-        sel = "+".join(_label(x["name"], x.get("target", "")) for x in r["selected"])
         print(f"seed {s}: truth {_label(r['truth']['name'], r['truth']['target'])}="
-              f"{r['truth']['value']:.4g} -> {sel} ({r['verdict']}"
-              f"{': ' + ', '.join(r['ambiguous']) if r['ambiguous'] else ''}) "
-              f"named={r['named']} in_ci={r['in_interval']} excess cut={r['excess_cut']:.3g} "
-              f"({r['seconds']:.1f}s)", flush=True)
+              f"{r['truth']['value']:.4g} -> {_answer(r)}", flush=True)
+        if "follow_up" in r:
+            print(f"  follow-up {r['follow_up']['excitation']} -> {_answer(r['follow_up'])}",
+                  flush=True)
         summary = summarise(rows)
         (out / "ball_hit_rate.json").write_text(
             json.dumps(dict(summary=summary, rows=rows), indent=1, default=float))
     plot(summary, out / "ball_hit_rate.png")
     return summary
+
+
+def _answer(r) -> str:
+    sel = "+".join(_label(x["name"], x.get("target", "")) for x in r["selected"])
+    return (f"{sel} ({r['verdict']}{': ' + ', '.join(r['ambiguous']) if r['ambiguous'] else ''})"
+            f" named={r['named']} in_ci={r['in_interval']} excess cut={r['excess_cut']:.3g} "
+            f"({r['seconds']:.1f}s)")
 
 
 def main(argv=None) -> int:
@@ -103,8 +127,11 @@ def main(argv=None) -> int:
     ap.add_argument("draws", type=int, nargs="?", default=40)
     ap.add_argument("first_seed", type=int, nargs="?", default=7000)
     ap.add_argument("--out", default="runs/ball_hit_rate")
+    ap.add_argument("--follow-up", action="store_true",
+                    help="record again with the proposed excitation on ambiguous verdicts")
     args = ap.parse_args(argv)
-    print(json.dumps(run(args.draws, args.first_seed, Path(args.out)), indent=1))
+    print(json.dumps(run(args.draws, args.first_seed, Path(args.out),
+                         follow_up=args.follow_up), indent=1))
     return 0
 
 

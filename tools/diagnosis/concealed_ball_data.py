@@ -24,13 +24,16 @@ rigid and undamped), a sensor delay of 0-8 ms (the recorded state lags the appli
 force: linear interpolation between samples), and a table height off by +-0.3 mm (for
 a contact_offset[ball_table] draw the effective truth is value - table_dz).
 
-Excitation: a 100 Hz controller (zero-order-held EE forces, PD on a moving EE target
-with gravity compensation, computed from the noisy measured state) repeats pushes of the
-ball in random directions, as the reference gait does: the EE lifts over the ball,
-lowers onto its top slowly (no impacts), presses 4-7 mm and rolls it along a min-jerk
-path of bounded peak acceleration (2-10 m/s^2: under mu = 1 neither contact slips, not
-even in the model's 4-edge friction pyramid; the EE-ball contact slips when its mu is
-below about 0.3), then lifts and hovers while the ball rolls on. ONE push per episode
+Excitation (the push gait: tools/diagnosis/ball_excitation.py; `follow_up=` records
+again under a gait change the report proposed): a 100 Hz controller (zero-order-held
+EE forces, PD on a moving EE target with gravity compensation, computed from the noisy
+measured state) repeats pushes of the ball in random directions, as the reference gait
+does: the EE lifts over the ball, lowers onto its top slowly (no impacts), presses 4-7
+mm and rolls it along a min-jerk path of bounded peak acceleration (2-10 m/s^2: under
+mu = 1 neither contact slips, not even in the model's 4-edge friction pyramid; the
+EE-ball contact slips when its mu is below about 0.3), then lifts and hovers. The
+default push ends at rest, so the ball slows with the EE and its free coasts are short
+and slow; a release push (Excitation.release_speed) lifts off while moving. ONE push per episode
 (many short episodes): the EE lowers onto a ball at rest, never onto a rolling one
 (touching down on a rolling ball slides the contact, where the Anitescu relaxation
 pushes the bodies apart: an artifact of the model that showed as a spurious
@@ -48,6 +51,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from adaptive_c3.tools.diagnosis.ball_excitation import Excitation, Pusher
 from adaptive_c3.tools.diagnosis.concealed_data import Truth, _either
 from adaptive_c3.tools.diagnosis.effects_ball import ModelParams
 
@@ -213,74 +217,6 @@ class TruePlant:
         return self.state()
 
 
-# ------------------------------------------------------------------ excitation
-def _minjerk(p0, p1, T, t):
-    s = np.clip(t / T, 0.0, 1.0)
-    h = 10 * s**3 - 15 * s**4 + 6 * s**5
-    dh = (30 * s**2 - 60 * s**3 + 30 * s**4) / T if t < T else 0.0
-    return p0 + (p1 - p0) * h, (p1 - p0) * dh
-
-
-class Pusher:
-    """Plans EE target segments relative to the measured ball (see the module doc)."""
-
-    def __init__(self, rng, p: ModelParams, center, pushes: int = 1):
-        self.rng, self.p, self.center = rng, p, np.asarray(center, float)
-        self.segs: list = []
-        self.pushes_left = pushes
-        self.hold = None
-
-    def _plan(self, ee, ball, vball):
-        rng, R, r = self.rng, self.p.ball_radius, self.p.ee_radius
-        ball = ball + 0.3 * vball * np.array([1, 1, 0])       # where it will roughly be
-        to_c = self.center - ball[:2]
-        ang = np.arctan2(to_c[1], to_c[0]) + rng.normal(0, 0.9 if np.linalg.norm(to_c) > 0.06 else 2.5)
-        d = np.array([np.cos(ang), np.sin(ang), 0.0])
-        high = 2 * R + r + 0.025
-        # lower onto its top, press and roll it along d (as the reference gait: the EE
-        # and the ball's top move together, no sliding at either contact under mu = 1)
-        press = rng.uniform(0.004, 0.007)
-        start = ball + np.array([0, 0, R + r - press]) - 0.004 * d
-        near = start + np.array([0, 0, 0.006])
-        L, a = rng.uniform(0.03, 0.08), rng.uniform(2.0, 10.0)
-        end = start + L * d
-        T_push = np.sqrt(5.77 * L / a)            # min-jerk peak acceleration = a
-        over = near.copy()
-        over[2] = high
-        lift = end.copy()
-        lift[2] = high
-        cur = ee.copy()
-        up = cur.copy()
-        up[2] = max(cur[2], high)
-        segs = [(cur, up, 0.12), (up, over, 0.25), (over, near, 0.2), (near, start, 0.15),
-                (start, end, T_push), (end, lift, 0.15)]
-        self.segs = [list(s) for s in segs]
-
-    def target(self, t_in_seg, ee, ball, vball):
-        """(p_ref, v_ref, seg done?) - plans a new push when the last one ends."""
-        if self.hold is not None:
-            return self.hold, np.zeros(3)
-        if not self.segs:
-            self.pushes_left -= 1
-            self._plan(ee, ball, vball)
-            self.t0 = t_in_seg
-        while self.segs:
-            p0, p1, T = self.segs[0]
-            tau = t_in_seg - self.t0
-            if tau <= T:
-                return _minjerk(p0, p1, T, tau)
-            self.t0 += T
-            last = self.segs.pop(0)[1]
-            if not self.segs and self.pushes_left <= 0:
-                self.hold = last
-        if self.hold is not None:            # pushes done: hover, the ball rolls on
-            return self.hold, np.zeros(3)
-        self.pushes_left -= 1
-        self._plan(ee, ball, vball)
-        self.t0 = t_in_seg
-        return self.target(t_in_seg, ee, ball, vball)
-
-
 def _random_quat(rng):
     yaw = rng.uniform(-np.pi, np.pi)
     q = rng.normal(size=4)
@@ -288,11 +224,13 @@ def _random_quat(rng):
     return q if rng.random() < 0.5 else np.array([np.cos(yaw / 2), 0, 0, np.sin(yaw / 2)])
 
 
-def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: float = 1.6,
-                   params: ModelParams | None = None, noise_scale: float | None = None,
-                   scenario_text: str | None = None, variation: Variation = Variation()):
-    """(Recording, clean states [T, 19]) of the true plant under the pushing excitation;
-    the recorded (and controlled-on) state lags by variation.sensor_delay."""
+def make_recording(truth: Truth, seed: int, episodes: int | None = None,
+                   duration_s: float | None = None, params: ModelParams | None = None,
+                   noise_scale: float | None = None, scenario_text: str | None = None,
+                   variation: Variation = Variation(), excitation: Excitation = Excitation()):
+    """(Recording, clean states [T, 19]) of the true plant under the push gait
+    `excitation` (episodes / duration_s override its own); the recorded (and
+    controlled-on) state lags by variation.sensor_delay."""
     from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
     from adaptive_c3.scenarios.schema import SCENARIO_DIR
     from adaptive_c3.tools.recording import Recording
@@ -303,7 +241,8 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
     sigma = NOISE_STD * noise_scale
     plant = TruePlant(p, truth, variation)
     lag = variation.sensor_delay / DT          # fraction of a step, < 1
-    steps = int(round(duration_s / DT))
+    episodes = excitation.episodes if episodes is None else episodes
+    steps = int(round((excitation.duration_s if duration_s is None else duration_s) / DT))
     kp, kd = (2 * np.pi * 4.0) ** 2, 2 * 0.8 * 2 * np.pi * 4.0
     ts, xs, us, eps, clean = [], [], [], [], []
     for e in range(episodes):
@@ -316,7 +255,7 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
         x[0:2] += rng.uniform(-0.05, 0.05, 2)
         plant.reset(x[:10].tolist() + [0.0] * 9)
         x = x_prev = plant.state()
-        pusher = Pusher(rng, p, center)
+        pusher = Pusher(rng, p, center, excitation=excitation, episode=e)
         for k in range(steps):
             seen = (1 - lag) * x + lag * x_prev
             y = seen + sigma * rng.standard_normal(19)
@@ -340,13 +279,20 @@ def make_recording(truth: Truth, seed: int, episodes: int = 15, duration_s: floa
     return rec, np.array(clean)
 
 
-def concealed_draw(seed: int, name=None, target=None, vary: bool = True, **kw):
+def concealed_draw(seed: int, name=None, target=None, vary: bool = True,
+                   follow_up: dict | None = None, **kw):
     """(Recording, Truth, clean states) for a seed; the truth stays with the harness.
-    vary: add the second-engine variation of draw_variation(seed) (or pass variation=)."""
+    vary: add the second-engine variation of draw_variation(seed) (or pass variation=).
+    follow_up: a gait change (ball_excitation.Excitation fields, as the report proposes):
+    a second recording of the same truth and variation under that gait, new noise."""
     rng = np.random.default_rng([seed, 11])
     truth = draw_effect(rng, name, target)
     variation = kw.pop("variation", None) or draw_variation(seed, vary)
-    rec, clean = make_recording(truth, seed=int(rng.integers(2**31)), variation=variation, **kw)
+    rec_seed = int(rng.integers(2**31))
+    if follow_up is not None:
+        kw["excitation"] = Excitation().changed(**follow_up)
+        rec_seed = int(np.random.default_rng([seed, 17]).integers(2**31))
+    rec, clean = make_recording(truth, seed=rec_seed, variation=variation, **kw)
     return rec, truth, clean
 
 
@@ -391,16 +337,37 @@ def judged_fields(result, truth) -> dict:
                           for f in result.get("nuisance", [])])
 
 
-def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> dict:
-    """Draw, diagnose (and run the SINDy baseline), score against the concealed truth."""
+def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: bool = False,
+               **kw) -> dict:
+    """Draw, diagnose (and run the SINDy baseline), score against the concealed truth.
+    follow_up: when the verdict is ambiguous, record again with the gait change the
+    report proposes (as its user would), diagnose both recordings together and score
+    that under row["follow_up"] (same keys)."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
-    from adaptive_c3.tools.diagnosis.diagnose import diagnose
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.ball_excitation import merge_changes
+    from adaptive_c3.tools.recording import concat_recordings
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     kw.setdefault("params", ModelParams.from_scenario(scenario))
     rec, truth, clean = concealed_draw(seed, **kw)
-    var = draw_variation(seed, kw.get("vary", True))
+    row = _score(seed, rec, clean, truth, scenario, baseline, pairs, kw.get("vary", True))
+    proposals = row.pop("proposals")
+    if follow_up and row["verdict"] == "ambiguous" and proposals:
+        change = merge_changes(p["excitation"] for p in proposals)
+        kw2 = {k: v for k, v in kw.items() if k not in ("episodes", "duration_s")}
+        rec2, _, clean2 = concealed_draw(seed, follow_up=change, **kw2)
+        both = concat_recordings([rec, rec2])
+        row2 = _score(seed, both, np.concatenate([clean, clean2]), truth, scenario, False,
+                      pairs, kw.get("vary", True))
+        row2.pop("proposals")
+        row["follow_up"] = dict(row2, excitation=change, seconds=row2["seconds"])
+    return row
+
+
+def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary) -> dict:
+    from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
+    from adaptive_c3.tools.diagnosis.diagnose import diagnose
+    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    var = draw_variation(seed, vary)
     spec = ball_spec(scenario)
     result = diagnose(rec, spec, progress=False, pairs=pairs)
     eff = Truth(truth.name, truth.target, effective_truth_value(truth, var), truth.unit)
@@ -408,6 +375,7 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, **kw) -> di
                           error_cut=clean_error_cut)
     row.update(variation=var.as_dict(), drawn_value=truth.value, **judged_fields(result, eff))
     row["favoured"] = bool(row["named"] and row["verdict"] != "ambiguous")
+    row["proposals"] = (result.get("judged") or {}).get("separating_excitation", [])
     return row
 
 

@@ -299,6 +299,9 @@ def cmd_diagnose(args) -> int:
     from adaptive_c3.tools.user_input import resolve_scenario_path
     from adaptive_c3.tools.diagnosis.report import write_report
     rec = load_recording(args.recording)
+    if getattr(args, "also", None):
+        from adaptive_c3.tools.recording import concat_recordings
+        rec = concat_recordings([rec] + [load_recording(p) for p in args.also])
     scenario, text, base = load_scenario_with_effects(resolve_scenario_path(args.scenario))
     if scenario.task == "rigid_object":
         from adaptive_c3.tools.diagnosis.rigid_diagnose import cmd_diagnose_rigid

@@ -31,32 +31,46 @@ EFFECT_PHASES = {
     "friction_coefficient": ("push",), "contact_offset": ("push", "coast", "rest"),
 }
 
-# (effect a, effect b) -> the excitation that separates them, as a scenario / gait change
-SEPARATING = {
-    frozenset({"rolling_resistance", "viscous_damping"}):
-        "a free coast of >= 0.5 s from >= 0.1 m/s (push length >= 0.08 m at >= 8 m/s^2, "
-        "then hold the EE >= 5 mm clear): rolling resistance decelerates the ball at a "
-        "constant rate, viscous drag in proportion to its speed",
-    frozenset({"external_force", "rolling_resistance"}):
-        "coasts in opposite directions (pushes along +x, -x, +y, -y): a fixed force speeds "
-        "the ball up one way and slows it the other, rolling resistance always opposes motion",
-    frozenset({"external_force", "viscous_damping"}):
-        "coasts in opposite directions and a ball left at rest for >= 1 s: a fixed force "
-        "drifts a resting ball, drag never moves it",
-    frozenset({"mass_scale", "friction_coefficient"}):
-        "pushes at two peak accelerations (2 and >= 8 m/s^2) with the same press: a lighter "
-        "or heavier ball changes the EE's response in proportion to the acceleration, low "
-        "EE-ball friction shows only when the push approaches slip",
-    frozenset({"mass_scale", "contact_offset"}):
-        "pushes with two press depths (3 and 8 mm): an offset shifts where contact starts, "
-        "the mass scales the EE's response to its force once in contact",
-    frozenset({"friction_coefficient", "contact_offset"}):
-        "pushes with two press depths (3 and 8 mm) at >= 8 m/s^2: friction limits the "
-        "tangential force at a given normal force, an offset shifts the normal force",
-}
-DEFAULT_SEPARATION = ("a longer recording (>= 25 episodes) mixing slow and fast pushes, "
-                      "free coasts of >= 0.5 s and rests of >= 1 s")
+# The excitation that separates two effects, or gives one more evidence: the text of
+# the report and the change to the push gait (ball_excitation.Excitation fields) that
+# runs it. A release push lets go of the ball at the given speed (the EE lifts off
+# while still moving), so the ball coasts freely.
+COAST = dict(release_speed=[0.1, 0.2], duration_s=2.4)
+COAST_BOTH_WAYS = dict(COAST, directions="axes")
+PRESS_DEPTHS = dict(press=[0.003, 0.008], episodes=25)
 
+# (effect a, effect b) -> (text, gait change)
+SEPARATING = {
+    frozenset({"rolling_resistance", "viscous_damping"}): (
+        "pushes that release the ball at 0.1-0.2 m/s (the EE lifts off while still moving) "
+        "and >= 1 s of free coast: rolling resistance decelerates the ball at a constant "
+        "rate, viscous drag in proportion to its speed", COAST),
+    frozenset({"external_force", "rolling_resistance"}): (
+        "release pushes along +x, +y, -x, -y in turn, then >= 1 s of free coast: a fixed "
+        "force speeds the ball up one way and slows it the other, rolling resistance always "
+        "opposes motion", COAST_BOTH_WAYS),
+    frozenset({"external_force", "viscous_damping"}): (
+        "release pushes along +x, +y, -x, -y in turn, then >= 1 s of free coast: a fixed "
+        "force acts the same at every speed and direction, drag opposes the motion in "
+        "proportion to speed", COAST_BOTH_WAYS),
+    frozenset({"mass_scale", "friction_coefficient"}): (
+        "more pushes (25 episodes) at peak accelerations of 8-12 m/s^2: a lighter or heavier "
+        "ball changes the EE's response in proportion to the acceleration, low EE-ball "
+        "friction shows only when the push approaches slip",
+        dict(peak_accel=[8.0, 12.0], episodes=25)),
+    frozenset({"mass_scale", "contact_offset"}): (
+        "pushes with press depths from 3 to 8 mm (25 episodes): an offset shifts where "
+        "contact starts, the mass scales the EE's response to its force once in contact",
+        PRESS_DEPTHS),
+    frozenset({"friction_coefficient", "contact_offset"}): (
+        "pushes with press depths from 3 to 8 mm at 8-10 m/s^2 (25 episodes): friction "
+        "limits the tangential force at a given normal force, an offset shifts the normal "
+        "force", dict(PRESS_DEPTHS, peak_accel=[8.0, 10.0])),
+}
+DEFAULT_SEPARATION = (
+    "a longer recording (25 episodes of 2.4 s) whose pushes release the ball at up to "
+    "0.15 m/s: free coasts and rests next to pushes of every speed",
+    dict(episodes=25, duration_s=2.4, release_speed=[0.0, 0.15]))
 
 def window_phases(spec, W) -> np.ndarray:
     """[W] phase name per rollout window (all `other` for models without the cache)."""
@@ -104,16 +118,39 @@ def evidence_windows(spec, W, phases, gain, name: str, top: int = 5) -> dict:
                 windows=runs[:top])
 
 
-MORE_EVIDENCE = {        # effect -> the excitation that gives it more evidence
-    "mass_scale": "more pushes (>= 25) at peak accelerations of 5-10 m/s^2: the ball's "
-                  "inertia shows in the EE's response to its known force",
-    "friction_coefficient": "pushes at >= 8 m/s^2 with a light press (3 mm): low EE-ball "
-                            "friction shows as slip",
-    "rolling_resistance": "free coasts of >= 0.5 s from >= 0.1 m/s",
-    "viscous_damping": "free coasts of >= 0.5 s from >= 0.2 m/s (drag grows with speed)",
-    "external_force": "a ball left at rest for >= 1 s and coasts in opposite directions",
-    "contact_offset": "slow touch-downs (EE descending at <= 2 cm/s) and >= 1 s rests",
+MORE_EVIDENCE = {        # effect -> (text, gait change) that gives it more evidence
+    "mass_scale": ("more pushes (25 episodes) at peak accelerations of 8-12 m/s^2: the "
+                   "ball's inertia shows in the EE's response to its known force",
+                   dict(peak_accel=[8.0, 12.0], episodes=25)),
+    "friction_coefficient": ("pushes at 8-10 m/s^2 with a light press (3-4 mm): low "
+                             "EE-ball friction shows as slip",
+                             dict(peak_accel=[8.0, 10.0], press=[0.003, 0.004])),
+    "rolling_resistance": ("pushes that release the ball at 0.1-0.2 m/s and >= 1 s of free "
+                           "coast", COAST),
+    "viscous_damping": ("pushes that release the ball at 0.15-0.25 m/s and >= 1 s of free "
+                        "coast (drag grows with speed)",
+                        dict(COAST, release_speed=[0.15, 0.25])),
+    "external_force": ("release pushes along +x, +y, -x, -y in turn and >= 1 s of free "
+                       "coast", COAST_BOTH_WAYS),
+    "contact_offset": ("slow touch-downs (the last 6 mm in 0.4 s) and >= 1 s rests",
+                       dict(touchdown_s=0.4, duration_s=2.4)),
 }
+
+
+def with_more_of_everything(text_change: tuple) -> tuple:
+    """An effect against `none`: its own excitation within the default longer recording
+    (the data showed little of anything, so the other effects get evidence too)."""
+    text, change = text_change
+    if change == DEFAULT_SEPARATION[1]:
+        return text_change
+    return (f"{text}; within {DEFAULT_SEPARATION[0]}",
+            {**DEFAULT_SEPARATION[1], **change})
+
+
+def proposal(between: list, text_change: tuple) -> dict:
+    """A separating_excitation entry: who it separates, the text, the gait change."""
+    text, change = text_change
+    return dict(between=between, change=text, excitation=dict(change))
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> float:
@@ -170,10 +207,10 @@ def verdict(fits, chosen, none_eval, min_reduction: float) -> dict:
         a, b = name(best), name(f)
         if "none" in (a, b):
             other = b if a == "none" else a
-            text = MORE_EVIDENCE.get(other, DEFAULT_SEPARATION)
+            how = with_more_of_everything(MORE_EVIDENCE.get(other, DEFAULT_SEPARATION))
         else:
-            text = SEPARATING.get(frozenset({a, b}), DEFAULT_SEPARATION)
-        proposals.append(dict(between=[row(best)["name"], row(f)["name"]], change=text))
+            how = SEPARATING.get(frozenset({a, b}), DEFAULT_SEPARATION)
+        proposals.append(proposal([row(best)["name"], row(f)["name"]], how))
     return dict(verdict="ambiguous", ambiguous=[row(f) for f in members],
                 separating_excitation=proposals)
 
@@ -237,9 +274,8 @@ def _join(judged, first: dict, other: dict) -> None:
     if not judged["ambiguous"]:
         judged["ambiguous"] = [first]
     judged["ambiguous"].append(other)
-    judged["separating_excitation"].append(dict(
-        between=[first["name"], other["name"]],
-        change=MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)))
+    judged["separating_excitation"].append(proposal(
+        [first["name"], other["name"]], MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)))
     judged["verdict"] = "ambiguous"
 
 

@@ -308,6 +308,7 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
     selected = selected_rows(result)
     report = dict(
         model=spec.name, horizon_steps=result["horizon"], dt=spec.dt, split=result["split"],
+        recording=dict(samples=int(len(rec.t)), episodes=len(list(rec.episodes()))),
         scenario_effects=[dict(name=c.name, target=c.target, value=[float(v) for v in p])
                           for c, p in result["base"]
                           if all(c not in f.cands for f in result.get("nuisance", []))],

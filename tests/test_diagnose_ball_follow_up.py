@@ -1,0 +1,113 @@
+"""The excitation `diagnose` proposes is a gait change that can be run: the push gait's
+release option makes free coasts, every proposal is a valid change of the gait, and
+(harness) running the proposal on an ambiguous draw separates the effects."""
+import numpy as np
+import pytest
+
+from adaptive_c3.tools.diagnosis.ball_excitation import Excitation, merge_changes, quintic
+from adaptive_c3.tools.recording import Recording, RecordingError, concat_recordings
+
+
+def test_quintic_meets_its_ends_and_is_min_jerk_at_rest():
+    p0, p1 = np.array([0.0, 0.0, 0.1]), np.array([0.08, 0.02, 0.1])
+    v1 = np.array([0.3, 0.1, 0.0])
+    for t in (0.0, 0.13, 0.27):          # v0 = v1 = 0 written out equals the min-jerk path
+        a, b = quintic(p0, p1, 0.27, t), quintic(p0, p1, 0.27, t, np.zeros(3), np.zeros(3))
+        assert np.allclose(a[0], b[0]) and np.allclose(a[1], b[1])
+    p, v = quintic(p0, p1, 0.4, 0.4 - 1e-9, None, v1)
+    assert np.allclose(p, p1, atol=1e-9) and np.allclose(v, v1, atol=1e-6)
+    p, v = quintic(p0, p1, 0.4, 0.0, None, v1)
+    assert np.allclose(p, p0) and np.allclose(v, 0.0)
+
+
+def test_excitation_changes_are_checked_and_merged():
+    ex = Excitation().changed(release_speed=[0.1, 0.2], episodes=25)
+    assert ex.release_speed == (0.1, 0.2) and ex.episodes == 25
+    assert ex.as_dict()["release_speed"] == [0.1, 0.2]
+    with pytest.raises(ValueError, match="unknown excitation fields"):
+        Excitation().changed(push_speed=1.0)
+    m = merge_changes([dict(episodes=15, press=[0.003, 0.004]),
+                       dict(episodes=25, press=[0.005, 0.008], duration_s=2.4)])
+    assert m == dict(episodes=25, press=[0.003, 0.004], duration_s=2.4)
+
+
+def test_every_proposal_is_a_gait_change():
+    from adaptive_c3.tools.diagnosis.evidence import (DEFAULT_SEPARATION, MORE_EVIDENCE,
+                                                      SEPARATING, with_more_of_everything)
+    for text, change in [*SEPARATING.values(), *MORE_EVIDENCE.values(), DEFAULT_SEPARATION]:
+        assert text and change
+        Excitation().changed(**change)
+    text, change = with_more_of_everything(MORE_EVIDENCE["contact_offset"])
+    assert change["touchdown_s"] == 0.4 and change["episodes"] == 25     # its own + more
+
+
+def test_release_pushes_let_the_ball_coast_clear_of_the_ee():
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
+    ex = dict(release_speed=[0.1, 0.2], duration_s=2.4, directions="axes", episodes=4)
+    rec, truth, clean = concealed_draw(3, name="none", follow_up=ex)
+    assert truth.name == "none" and len(set(rec.episode)) == 4
+    R = 0.0315
+    headings = []
+    for e, idx in rec.episodes():
+        x = clean[idx]
+        assert len(idx) == 240
+        gap = np.linalg.norm(x[:, 0:3] - x[:, 7:10], axis=1)
+        free = gap > gap.min() + 0.02           # the EE well clear of the ball
+        late = np.flatnonzero(free)[-60:]       # the last 0.6 s: coasting
+        speed = np.linalg.norm(x[late, 16:18], axis=1)
+        assert speed.min() > 0.08 and speed.max() < 0.3, speed       # no effect: no slowing
+        assert abs(x[late, 9] - R).max() < 1e-3                       # on the table
+        v = x[late[-1], 16:18]
+        headings.append(np.degrees(np.arctan2(v[1], v[0])))
+    assert np.allclose(np.diff(np.unwrap(np.radians(headings))), np.pi / 2, atol=0.3)
+
+
+def test_concat_recordings_keeps_episodes_apart():
+    def rec(eps, n=None):
+        n = len(eps) if n is None else n
+        return Recording(t=np.arange(n) * 0.01, x=np.zeros((n, 2)), u=np.zeros((n, 1)),
+                         state_names=["a", "b"], input_names=["u"],
+                         episode=None if eps is None else np.array(eps))
+    both = concat_recordings([rec([3, 3, 7, 7]), rec(None, n=1), rec([0, 0, 1])])
+    assert both.episode.tolist() == [0, 0, 1, 1, 2, 3, 3, 4]
+    assert len(both.t) == 8 and both.x.shape == (8, 2)
+    other = rec([0])
+    other.state_names = ["a", "c"]
+    with pytest.raises(RecordingError):
+        concat_recordings([rec([0]), other])
+
+
+def test_cli_also_diagnoses_a_second_recording_as_more_episodes(tmp_path, capsys):
+    import json
+
+    from adaptive_c3.tools.cli import main
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
+    from adaptive_c3.tools.recording import save_recording
+    a, _, _ = concealed_draw(7, name="none", episodes=3, duration_s=1.2)
+    b, _, _ = concealed_draw(7, name="none", follow_up=dict(episodes=3, duration_s=1.2))
+    save_recording(tmp_path / "a.npz", a)
+    save_recording(tmp_path / "b.npz", b)
+    out = tmp_path / "out"
+    rc = main(["diagnose", str(tmp_path / "a.npz"), "--also", str(tmp_path / "b.npz"),
+               "--scenario", "ball_rolling", "--out", str(out)])
+    assert rc == 0
+    report = json.loads((out / "report.json").read_text())
+    assert report["recording"]["episodes"] == 6, report["recording"]
+    rc = main(["diagnose", str(tmp_path / "a.npz"), "--also", str(tmp_path / "nope.npz"),
+               "--scenario", "ball_rolling", "--out", str(out)])
+    assert rc == 2
+    assert "not found" in capsys.readouterr().err
+
+
+def test_running_the_proposed_coast_separates_drag_from_rolling_resistance():
+    """Draw 8007: a 0.29 N s/m drag that the standard pushes (which end with the ball at
+    rest under the EE) cannot tell from rolling resistance; the report proposes release
+    pushes with free coasts, and with that second recording drag is named, its value
+    inside the interval."""
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    r = score_draw(8007, baseline=False, follow_up=True)
+    assert r["truth"]["name"] == "viscous_damping"
+    assert r["verdict"] == "ambiguous" and "viscous_damping[ball]" in r["ambiguous"]
+    f = r["follow_up"]
+    assert f["excitation"]["release_speed"][0] >= 0.1
+    assert f["named"] and f["in_interval"], f["selected"]

@@ -1,0 +1,159 @@
+"""The push gait of ball-rolling diagnosis recordings, and the changes to it that
+`diagnose` proposes when the data cannot separate two effects.
+
+One push per episode: the EE lifts over the ball, lowers onto its top, presses and
+rolls it along a smooth path, lifts and hovers while the ball rolls on. `Excitation`
+holds what a user would change: the press depth, the push length and peak
+acceleration, the ball's speed when the EE lets go (0: the push ends at rest, so the
+ball stops under the EE; > 0: the EE lifts off while still moving and the ball coasts
+freely), push directions (random, or cycling +x, +y, -x, -y), the touch-down time, the
+number and length of episodes. Positions in the world frame, m; speeds m/s; times s.
+
+`Excitation.changed(**fields)` is what a proposal in the report holds
+(`separating_excitation[i].excitation`), e.g. {"release_speed": [0.1, 0.2],
+"duration_s": 2.4}.
+"""
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, fields, replace
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Excitation:
+    """The push gait. Ranges are (low, high): each push draws uniformly inside."""
+    episodes: int = 15
+    duration_s: float = 1.6
+    press: tuple = (0.004, 0.007)          # m, how far the EE target goes below contact
+    push_length: tuple = (0.03, 0.08)      # m, EE travel while rolling the ball
+    peak_accel: tuple = (2.0, 10.0)        # m/s^2, of a push that ends at rest
+    release_speed: tuple = (0.0, 0.0)      # m/s, the ball's speed when the EE lets go
+    directions: str = "random"             # random | axes (+x, +y, -x, -y in turn)
+    touchdown_s: float = 0.15              # s, the last 6 mm of the descent onto the top
+
+    def changed(self, **kw) -> "Excitation":
+        known = {f.name for f in fields(self)}
+        bad = sorted(set(kw) - known)
+        if bad:
+            raise ValueError(f"unknown excitation fields {bad} (known: {sorted(known)})")
+        return replace(self, **{k: tuple(v) if isinstance(v, list) else v
+                                for k, v in kw.items()})
+
+    def as_dict(self) -> dict:
+        return {k: list(v) if isinstance(v, tuple) else v for k, v in asdict(self).items()}
+
+
+def merge_changes(changes) -> dict:
+    """One excitation change from several proposals: the most episodes and the longest
+    episodes; for every other field the first proposal that sets it."""
+    out: dict = {}
+    for ch in changes:
+        for k, v in ch.items():
+            if k in ("episodes", "duration_s"):
+                out[k] = max(out.get(k, v), v)
+            else:
+                out.setdefault(k, v)
+    return out
+
+
+def quintic(p0, p1, T, t, v0=None, v1=None):
+    """(position, velocity) at t of the quintic from p0 (velocity v0) to p1 (v1) in T
+    with zero acceleration at both ends; v0 = v1 = 0 is the minimum-jerk path."""
+    s = np.clip(t / T, 0.0, 1.0)
+    if v0 is None and v1 is None:
+        h = 10 * s**3 - 15 * s**4 + 6 * s**5
+        dh = (30 * s**2 - 60 * s**3 + 30 * s**4) / T if t < T else 0.0
+        return p0 + (p1 - p0) * h, (p1 - p0) * dh
+    a = np.zeros_like(p0) if v0 is None else v0 * T
+    b = np.zeros_like(p0) if v1 is None else v1 * T
+    d = p1 - p0
+    c3, c4, c5 = 10 * d - 6 * a - 4 * b, -15 * d + 8 * a + 7 * b, 6 * d - 3 * a - 3 * b
+    p = p0 + a * s + c3 * s**3 + c4 * s**4 + c5 * s**5
+    v = (a + 3 * c3 * s**2 + 4 * c4 * s**3 + 5 * c5 * s**4) / T
+    if t >= T:
+        return p1.copy(), (np.zeros_like(p0) if v1 is None else v1.copy())
+    return p, v
+
+
+class Pusher:
+    """Plans EE target segments relative to the measured ball (one push, then hover).
+
+    Segments are (p0, p1, T, v0, v1); v None means at rest."""
+
+    LIFT_S = 0.12          # s, lift-off while moving (release pushes)
+    STOP_S = 0.3           # s, the EE's horizontal stop after a release
+
+    def __init__(self, rng, p, center, pushes: int = 1, excitation: Excitation = Excitation(),
+                 episode: int = 0):
+        self.rng, self.p, self.center = rng, p, np.asarray(center, float)
+        self.ex, self.episode = excitation, episode
+        self.segs: list = []
+        self.pushes_left = pushes
+        self.hold = None
+
+    def _direction(self, ball) -> np.ndarray:
+        if self.ex.directions == "axes":
+            ang = 0.5 * np.pi * (self.episode % 4)
+        else:
+            to_c = self.center - ball[:2]
+            spread = 0.9 if np.linalg.norm(to_c) > 0.06 else 2.5
+            ang = np.arctan2(to_c[1], to_c[0]) + self.rng.normal(0, spread)
+        return np.array([np.cos(ang), np.sin(ang), 0.0])
+
+    def _plan(self, ee, ball, vball):
+        rng, ex, R, r = self.rng, self.ex, self.p.ball_radius, self.p.ee_radius
+        ball = ball + 0.3 * vball * np.array([1, 1, 0])       # where it will roughly be
+        d = self._direction(ball)
+        high = 2 * R + r + 0.025
+        # lower onto its top, press and roll it along d (the EE and the ball's top move
+        # together: no sliding at either contact under mu = 1)
+        press = rng.uniform(*ex.press)
+        start = ball + np.array([0, 0, R + r - press]) - 0.004 * d
+        near = start + np.array([0, 0, 0.006])
+        L, a = rng.uniform(*ex.push_length), rng.uniform(*ex.peak_accel)
+        release = rng.uniform(*ex.release_speed) if ex.release_speed[1] > 0 else 0.0
+        end = start + L * d
+        over = near.copy()
+        over[2] = high
+        up = ee.copy()
+        up[2] = max(ee[2], high)
+        segs = [(ee.copy(), up, 0.12), (up, over, 0.25), (over, near, 0.2),
+                (near, start, ex.touchdown_s)]
+        if release <= 0.0:
+            lift = end.copy()
+            lift[2] = high
+            segs += [(start, end, np.sqrt(5.77 * L / a)),    # min-jerk peak accel = a
+                     (end, lift, 0.15)]
+        else:            # the EE's top contact moves at twice the rolling ball's speed
+            v = 2.0 * release * d
+            lift = end + v * self.LIFT_S
+            lift[2] = high
+            stop = lift + 0.5 * v * self.STOP_S
+            segs += [(start, end, 1.5 * L / (2.0 * release), None, v),
+                     (end, lift, self.LIFT_S, v, v), (lift, stop, self.STOP_S, v, None)]
+        self.segs = [list(s) + [None] * (5 - len(s)) for s in segs]
+
+    def target(self, t_in_seg, ee, ball, vball):
+        """(p_ref, v_ref) - plans a new push when the last one ends."""
+        if self.hold is not None:
+            return self.hold, np.zeros(3)
+        if not self.segs:
+            self.pushes_left -= 1
+            self._plan(ee, ball, vball)
+            self.t0 = t_in_seg
+        while self.segs:
+            p0, p1, T, v0, v1 = self.segs[0]
+            tau = t_in_seg - self.t0
+            if tau <= T:
+                return quintic(p0, p1, T, tau, v0, v1)
+            self.t0 += T
+            last = self.segs.pop(0)[1]
+            if not self.segs and self.pushes_left <= 0:
+                self.hold = last
+        if self.hold is not None:            # pushes done: hover, the ball rolls on
+            return self.hold, np.zeros(3)
+        self.pushes_left -= 1
+        self._plan(ee, ball, vball)
+        self.t0 = t_in_seg
+        return self.target(t_in_seg, ee, ball, vball)
