@@ -26,9 +26,11 @@ def test_excitation_changes_are_checked_and_merged():
     assert ex.as_dict()["release_speed"] == [0.1, 0.2]
     with pytest.raises(ValueError, match="unknown excitation fields"):
         Excitation().changed(push_speed=1.0)
-    m = merge_changes([dict(episodes=15, press=[0.003, 0.004]),
-                       dict(episodes=25, press=[0.005, 0.008], duration_s=2.4)])
-    assert m == dict(episodes=25, press=[0.003, 0.004], duration_s=2.4)
+    m = merge_changes([dict(episodes=15, press=[0.003, 0.004], release_speed=[0.0, 0.15]),
+                       dict(episodes=25, press=[0.005, 0.008], duration_s=2.4,
+                            release_speed=[0.1, 0.2], directions="axes")])
+    assert m == dict(episodes=25, press=[0.003, 0.004], duration_s=2.4,
+                     release_speed=[0.1, 0.2], directions="axes")
 
 
 def test_every_proposal_is_a_gait_change():

@@ -45,15 +45,21 @@ class Excitation:
 
 
 def merge_changes(changes) -> dict:
-    """One excitation change from several proposals: the most episodes and the longest
-    episodes; for every other field the first proposal that sets it."""
+    """One excitation change from several proposals, each asking for more of something:
+    the most and the longest episodes, the faster release, the slower touch-down, axis
+    directions if any asks for them; press and acceleration from the first that sets
+    them."""
     out: dict = {}
     for ch in changes:
         for k, v in ch.items():
-            if k in ("episodes", "duration_s"):
-                out[k] = max(out.get(k, v), v)
-            else:
-                out.setdefault(k, v)
+            if k not in out:
+                out[k] = v
+            elif k in ("episodes", "duration_s", "touchdown_s"):
+                out[k] = max(out[k], v)
+            elif k == "release_speed":
+                out[k] = max(out[k], v, key=lambda r: r[1])
+            elif k == "directions" and v == "axes":
+                out[k] = v
     return out
 
 

@@ -6,6 +6,7 @@ Each draw (tools/diagnosis/concealed_ball_data.py, with the second-engine variat
 diagnosed and scored:
   named          the concealed effect (or none) is the one selected, i.e. named first
   favoured       ... and the verdict is `named` (not ambiguous)
+  confident_wrong  draws whose verdict is not ambiguous and whose answer is wrong
   in_interval    named, and the effective truth inside the reported 95% interval
   ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
   excess cut     held-out rollout excess-over-noise (noisy data) before / after
@@ -52,6 +53,7 @@ def _summary(rows) -> dict:
     return dict(
         draws=len(rows), named=rate(rows, "named"), named_effect_draws=rate(eff, "named"),
         favoured=rate(rows, "favoured"), none_on_clean=rate(clean, "named"),
+        confident_wrong=sum(r["verdict"] != "ambiguous" and not r["named"] for r in rows),
         clean_draws=len(clean), coverage=rate(named_eff, "in_interval"),
         named_effect_count=len(named_eff), ambiguous_draws=len(amb),
         truth_in_ambiguous=rate(amb, "in_ambiguous_set"),

@@ -137,6 +137,10 @@ MORE_EVIDENCE = {        # effect -> (text, gait change) that gives it more evid
 }
 
 
+NO_GAIT = ("a longer recording whose inputs excite the system more widely (other "
+           "amplitudes and frequencies)", {})
+
+
 def with_more_of_everything(text_change: tuple) -> tuple:
     """An effect against `none`: its own excitation within the default longer recording
     (the data showed little of anything, so the other effects get evidence too)."""
@@ -150,7 +154,10 @@ def with_more_of_everything(text_change: tuple) -> tuple:
 def proposal(between: list, text_change: tuple) -> dict:
     """A separating_excitation entry: who it separates, the text, the gait change."""
     text, change = text_change
-    return dict(between=between, change=text, excitation=dict(change))
+    out = dict(between=between, change=text)
+    if change:
+        out["excitation"] = dict(change)
+    return out
 
 
 def _paired(a: np.ndarray, b: np.ndarray) -> float:
@@ -173,23 +180,34 @@ def fit_row(f, none_eval) -> dict:
                 ssr_reduction=float(f.reduction), z_vs_none=float(f.z_vs_none))
 
 
-def verdict(fits, chosen, none_eval, min_reduction: float) -> dict:
+def worse_z(family: int) -> float:
+    """The paired z beyond which one of `family` rivals is clearly worse than the chosen
+    fit: one-sided 5 % shared among them (Bonferroni), so that the truth, when it is one
+    of them, is dropped from the ambiguous set in at most 5 % of diagnoses."""
+    from scipy.stats import norm
+    return max(Z_AMBIG, float(norm.ppf(1.0 - 0.05 / max(family, 1))))
+
+
+def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = None,
+            gait: bool = True) -> dict:
     """named | ambiguous | none, the ambiguous set (best first; None = the unmodified model)
     and, per competitor of the best, the excitation that would separate them.
 
     The set holds the chosen fit; every single physical effect that clearly beats the
     unmodified model across clusters (paired z >= Z_AMBIG) and is not clearly worse than
-    the chosen one (paired z < Z_AMBIG); and `none` when the chosen fit's gain is not
+    the chosen one (paired z < worse_z(family), family: the single effects compared,
+    by default those in fits); and `none` when the chosen fit's gain is not
     consistent across clusters (z < Z_AMBIG: a few events carry it). With nothing chosen,
     singles with z >= Z_AMBIG and at least half the reduction a choice needs join `none`."""
-    singles = [f for f in sorted(fits, key=lambda f: f.score)
-               if len(f.cands) == 1 and f.physical and f.z_vs_none >= Z_AMBIG]
+    physical = [f for f in fits if len(f.cands) == 1 and f.physical]
+    z_worse = worse_z(len(physical) - 1 if family is None else family)
+    singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG]
     if chosen is None:
         near = [f for f in singles if f.reduction >= 0.5 * min_reduction]
         members = [None] + near if near else []
     else:
         members = [chosen] + [f for f in singles if f.cands != chosen.cands and _paired(
-            f.test_cluster_ssr, chosen.test_cluster_ssr) < Z_AMBIG]
+            f.test_cluster_ssr, chosen.test_cluster_ssr) < z_worse]
         if chosen.z_vs_none < Z_AMBIG:
             members.append(None)
     if len(members) < 2:
@@ -210,7 +228,8 @@ def verdict(fits, chosen, none_eval, min_reduction: float) -> dict:
             how = with_more_of_everything(MORE_EVIDENCE.get(other, DEFAULT_SEPARATION))
         else:
             how = SEPARATING.get(frozenset({a, b}), DEFAULT_SEPARATION)
-        proposals.append(proposal([row(best)["name"], row(f)["name"]], how))
+        proposals.append(proposal([row(best)["name"], row(f)["name"]],
+                                  how if gait else NO_GAIT))
     return dict(verdict="ambiguous", ambiguous=[row(f) for f in members],
                 separating_excitation=proposals)
 
@@ -248,8 +267,10 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     joins the ambiguous set. A consistent push-phase choice stays, with the free-window
     effect added to its ambiguous set (each explains different windows)."""
     from adaptive_c3.tools.diagnosis.fit import select
-    judged = verdict(fits, chosen, none_eval, min_reduction)
-    sub = free_ball_problem(prob) if getattr(prob.spec, "free_ball", False) else None
+    gait = bool(getattr(prob.spec, "free_ball", False))     # the ball's push gait
+    judged = verdict(fits, chosen, none_eval, min_reduction, gait=gait)
+    family = sum(len(f.cands) == 1 and f.physical for f in fits) - 1
+    sub = free_ball_problem(prob) if gait else None
     if sub is None:
         return chosen, judged, [], (prob, none_eval)
     free_c = [c for c in cands if c.name in FREE_EFFECTS]
@@ -262,7 +283,7 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     if not (chosen is None or global_free or chosen.z_vs_none < Z_AMBIG):
         _join(judged, row_g, row_f)
         return chosen, judged, fits_f, (prob, none_eval)
-    judged_f = verdict(fits_f, chosen_f, none_f, min_reduction)
+    judged_f = verdict(fits_f, chosen_f, none_f, min_reduction, family)
     judged_f["free_windows"] = int(np.sum(sub.fold >= 0))
     if chosen is not None and not global_free:       # a push-phase rival stays in the set
         _join(judged_f, row_f, row_g)

@@ -32,7 +32,9 @@ fewer parameters, then the lower score. Pairs of the four best single physical e
 are fitted too and compete under the same rule when they cut the held-out SSR of each
 of their two effects alone by a further 5% (so a pair wins over a single effect only if
 its score is lower by SCORE_MARGIN, and two physical contact offsets win over the
-equally good two-parameter r_comp). (The paired
+equally good two-parameter r_comp). Where the spec has calibration nuisances, an r_comp
+with a pair offset inside the calibration tolerance is no choice (that part is
+calibration; the other pair's contact_offset competes on its own). (The paired
 per-cluster z of each fit against the unmodified model is reported, not used: the
 reductions are concentrated in few clusters, e.g. contacts, so it is a poor test.)
 """
@@ -408,6 +410,15 @@ def _at_bound(f, c, spec, rel: float = 0.02) -> bool:
     return bool(np.any(f.values <= lo + rel * span) or np.any(f.values >= hi - rel * span))
 
 
+def _calibration_sized(f) -> bool:
+    """An r_comp fit with a pair offset within the calibration tolerance: that pair's
+    part is calibration (a nuisance), not an effect; the other pair's contact_offset
+    is the effect (chosen on its own merit), so r_comp is not a choice."""
+    from adaptive_c3.tools.diagnosis.effects import CALIBRATION_TOLERANCE
+    return any(c.name == "r_comp" for c in f.cands) and \
+        bool(np.any(np.abs(f.values) < CALIBRATION_TOLERANCE))
+
+
 def fit_nuisance(prob: Problem) -> list:
     """Fits of the spec's nuisance effects (spec.nuisance: [(name, target)]) that the
     held-out data support, each then kept in prob.base for everything that follows. A
@@ -457,6 +468,8 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True, offset: int 
                 eligible.append(f)
             if progress:
                 progress.update(offset + len(fits))
+    if any(n == "calibration_offset" for n, _ in getattr(prob.spec, "nuisance", ())):
+        eligible = [f for f in eligible if not _calibration_sized(f)]
     chosen = _choose(eligible, getattr(prob.spec, "equal_reduction", 0.0))
     if chosen is not None:
         if not len(chosen.shift):

@@ -116,9 +116,15 @@ def ambiguity_summary(report) -> str:
                       f"(held-out {_fmt(a['held_out_score'])})" for a in report["ambiguous"])
     fix = "; ".join(f"{' vs '.join(p['between'])}: {p['change']}"
                     for p in report["separating_excitation"])
+    gait = any("excitation" in p for p in report["separating_excitation"])
     return out + (f" AMBIGUOUS: the held-out data do not favour one of {names} beyond "
                   f"their uncertainty; the first is only the best-scoring. To separate "
-                  f"them: {fix}.")
+                  f"them: {fix}. Record that{GAIT_NOTE if gait else ''} and diagnose both "
+                  f"recordings together (`adaptive-c3 diagnose THIS.npz --also NEW.npz "
+                  f"--scenario ...`).")
+
+
+GAIT_NOTE = " (separating_excitation[].excitation: the push gait's fields to change)"
 
 
 def plain_summary(result, selected) -> str:
