@@ -113,3 +113,22 @@ def test_running_the_proposed_coast_separates_drag_from_rolling_resistance():
     f = r["follow_up"]
     assert f["excitation"]["release_speed"][0] >= 0.1
     assert f["named"] and f["in_interval"], f["selected"]
+
+
+def test_r_comp_with_a_calibration_sized_pair_is_no_choice():
+    """r_comp offsets both pairs; when one of them is inside the calibration tolerance
+    (1 mm) that part is calibration and the other pair's contact_offset is the answer
+    (draw 9039: a -2.33 mm table offset was named r_comp with 0.4 mm on the EE-ball pair)."""
+    from types import SimpleNamespace
+
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.effects import Candidate
+    from adaptive_c3.tools.diagnosis.fit import _calibration_sized
+    rc = [Candidate("r_comp", "all_pairs")]
+    assert _calibration_sized(SimpleNamespace(cands=rc, values=np.array([4e-4, -2.3e-3])))
+    assert not _calibration_sized(SimpleNamespace(cands=rc, values=np.array([2e-3, -2.3e-3])))
+    off = [Candidate("contact_offset", "ball_table")]
+    assert not _calibration_sized(SimpleNamespace(cands=off, values=np.array([4e-4])))
+    r = score_draw(9039, baseline=False)
+    assert r["truth"]["name"] == "contact_offset" and r["named"], r["selected"]
+    assert r["in_interval"], r["selected"]

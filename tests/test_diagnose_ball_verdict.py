@@ -113,17 +113,24 @@ def test_hit_rate_fast(seed, name, target):
 # ------------------------------------------------------------------ the hit rate (slow)
 @pytest.mark.slow
 def test_ball_per_effect_hit_rate_slow(tmp_path):
-    """>= 40 concealed draws with the second-engine variation; writes JSON + a figure."""
+    """>= 40 concealed draws with the second-engine variation, each ambiguous verdict
+    followed by one recording with the excitation the report proposed (as its user
+    would); writes JSON + a figure. Bars for the first answer and after the follow-up."""
     from adaptive_c3.tools.diagnosis.ball_hit_rate import run
     out = os.environ.get("ADAPTIVE_C3_BALL_HIT_RATE_DIR") or str(tmp_path)
-    s = run(40, 8000, Path(out))
+    s = run(40, 8000, Path(out), follow_up=True)
     print(json.dumps(s, indent=1))
     assert s["draws"] >= 40
-    # measured bars (not the issue's targets, which are not reached: see README)
+    # measured bars (not all of the issue's targets are reached: see README)
     assert s["named"] >= SLOW_NAMED, s
     assert s["truth_in_ambiguous"] is None or s["truth_in_ambiguous"] >= SLOW_IN_AMBIGUOUS, s
     assert s["none_on_clean"] >= SLOW_NONE_ON_CLEAN, s
     assert s["coverage"] >= SLOW_COVERAGE, s
+    f = s["after_follow_up"]
+    assert f["named"] >= SLOW_NAMED_AFTER_FOLLOW_UP, f
+    assert f["none_on_clean"] == 1.0, f
+    assert f["coverage"] >= SLOW_COVERAGE, f
+    assert f["truth_in_ambiguous"] is None or f["truth_in_ambiguous"] == 1.0, f
 
 
 SLOW_NAMED = 0.7          # measured 0.725 (29/40), seeds 8000-8039 (0.55 before the
@@ -131,7 +138,8 @@ SLOW_NAMED = 0.7          # measured 0.725 (29/40), seeds 8000-8039 (0.55 before
 SLOW_IN_AMBIGUOUS = 0.8   # measured 0.85 (11/13 ambiguous draws; 0.73 before)
 SLOW_NONE_ON_CLEAN = 0.8  # measured 4/5 (2/5 before)
 SLOW_COVERAGE = 0.85      # measured 0.92 (23/25 named draws; 0.80 before the nuisance
-                          # and push-force allowances on the interval)
+                          # and push-force allowances on the interval); 0.90 after follow-up
+SLOW_NAMED_AFTER_FOLLOW_UP = 0.85   # measured 0.875 (35/40: all but the 5 mass draws)
 
 
 def test_calibration_offset_is_a_nuisance_only_and_folds_into_a_selected_offset():

@@ -170,6 +170,22 @@ def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
                 windows=int(len(err)))
 
 
+def long_problem(rec, spec, prob, P0, sigma, stride: int):
+    """prob's fit problem with FREE_HORIZON-step rollouts (the free-ball effects' fits;
+    None for models without free-ball windows or recordings too short for them)."""
+    from adaptive_c3.tools.diagnosis.evidence import FREE_HORIZON
+    if not getattr(spec, "free_ball", False):
+        return None
+    try:
+        W = make_windows(rec, FREE_HORIZON)
+    except ValueError:
+        return None
+    fold, _ = fold_ids(rec, W)
+    keep = np.arange(len(W)) % stride == 0
+    floor = prediction_floor(P0, sigma, FREE_HORIZON)
+    return Problem(spec, list(prob.base), W.take(keep), fold[keep], fit_weight(spec) / floor)
+
+
 def in_windows(W, windows, rec) -> np.ndarray:
     ep_ids = rec.episode[W.row] if rec.episode is not None else np.zeros(len(W), int)
     m = np.zeros(len(W), bool)
@@ -217,7 +233,8 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     bar.update(2)
     chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs, offset=2)
     chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
-        prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION))
+        prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION),
+        free_prob=long_problem(rec, spec, prob, P0, sigma, stride))
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)
