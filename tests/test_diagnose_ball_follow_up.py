@@ -132,3 +132,24 @@ def test_r_comp_with_a_calibration_sized_pair_is_no_choice():
     r = score_draw(9039, baseline=False)
     assert r["truth"]["name"] == "contact_offset" and r["named"], r["selected"]
     assert r["in_interval"], r["selected"]
+
+
+def test_report_shows_the_value_refitted_per_phase():
+    """The model-form allowance's per-phase estimates reach the report (`by_phase`), with
+    the pair's calibration added as to the value itself."""
+    from types import SimpleNamespace
+
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.effects import Candidate
+    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.report import _params
+    spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
+    fit = SimpleNamespace(cands=[Candidate("contact_offset", "ee_ball")],
+                          values=np.array([2.5e-3]), ci=np.array([[2.0e-3, 3.0e-3]]),
+                          sd=np.array([2e-4]),
+                          phase_estimates={"push_light": [2.2e-3], "push_firm": [2.9e-3]})
+    row = _params(fit, spec, {"ee_ball": 1e-4})[0]
+    assert row["by_phase"] == {"push_light": pytest.approx([2.3e-3]),
+                               "push_firm": pytest.approx([3.0e-3])}
+    fit.phase_estimates = None
+    assert "by_phase" not in _params(fit, spec)[0]

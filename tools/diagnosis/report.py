@@ -17,7 +17,9 @@ PLOT_ROLLOUT_STEPS = 40
 def _params(fit, spec, shift=None):
     """The fit's effects as report rows. shift {pair: m}: calibration offsets fitted as
     nuisance, added to a contact_offset / r_comp of the same pair (whose value is then
-    the offset from the user's model)."""
+    the offset from the user's model). `by_phase`: the value refitted on each phase's
+    windows alone (coast, rest, light / firm pushes), where the interval's model-form
+    allowance comes from."""
     out, i = [], 0
     for c in fit.cands:
         p = c.num_params(spec)
@@ -25,12 +27,17 @@ def _params(fit, spec, shift=None):
         pairs = (spec.pair_names if c.name == "r_comp" else [c.target] * p)
         add = [(shift or {}).get(pairs[j], 0.0) if c.name in ("contact_offset", "r_comp")
                else 0.0 for j in range(p)]
-        out.append(dict(
+        row = dict(
             name=c.name, target=c.target,
             params=[dict(name=names[j], value=float(fit.values[i + j]) + add[j], unit=units[j],
                          ci95=[float(fit.ci[i + j, 0]) + add[j],
                                float(fit.ci[i + j, 1]) + add[j]],
-                         sd=float(fit.sd[i + j])) for j in range(p)]))
+                         sd=float(fit.sd[i + j])) for j in range(p)])
+        by_phase = getattr(fit, "phase_estimates", None)     # evidence.widen_for_phases
+        if by_phase:
+            row["by_phase"] = {ph: [float(v[i + j]) + add[j] for j in range(p)]
+                               for ph, v in by_phase.items()}
+        out.append(row)
         i += p
     return out
 
