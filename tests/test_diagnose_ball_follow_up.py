@@ -153,3 +153,17 @@ def test_report_shows_the_value_refitted_per_phase():
                                "push_firm": pytest.approx([3.0e-3])}
     fit.phase_estimates = None
     assert "by_phase" not in _params(fit, spec)[0]
+
+
+def test_mass_is_judged_against_its_own_spurious_level():
+    """Mass never takes up the compliant contact (<= 0.19 % on clean draws, where EE-ball
+    friction reaches 7.6 %), so it needs the global 2 % cut, not the 10 % the contact
+    effects need. Draw 8000 (a 1.71x ball), reported `none` before: mass first, its
+    value inside the interval, friction beside it in the ambiguous set."""
+    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.effects_ball import BallSpec
+    assert BallSpec.__dataclass_fields__["min_reduction_by_effect"].default_factory() \
+        == {"mass_scale": 0.02}
+    r = score_draw(8000, baseline=False)
+    assert r["truth"]["name"] == "mass_scale"
+    assert r["named"] and r["in_interval"], r["selected"]

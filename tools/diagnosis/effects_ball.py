@@ -126,6 +126,11 @@ class BallSpec(SystemSpec):
     # rigid 4-edge Anitescu model even with nothing concealed: on clean draws the best
     # spurious fit cut the held-out SSR by up to ~5%. An effect must cut it by >= 10%.
     min_reduction: float = 0.10
+    # ... except for an effect whose own spurious fits stay far below that: on twelve
+    # clean draws (seeds 200-211) mass_scale's held-out cut was at most 0.19 % (z <= 1.7),
+    # where EE-ball friction reached 7.6 % and the EE-ball offset 6 % (they take up the
+    # compliant contact); mass needs the global 2 %
+    min_reduction_by_effect: dict = field(default_factory=lambda: {"mass_scale": 0.02})
     # for the same reason a pair must cut the better single's held-out SSR by >= 20%
     # more (a small spurious contact offset rides along with any real effect otherwise)
     pair_reduction: float = 0.20

@@ -387,6 +387,9 @@ def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
     min_red = prob.min_reduction
     if min_red is None:
         min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
+        own = getattr(prob.spec, "min_reduction_by_effect", {})        # ... and per effect
+        if len(fit.cands) == 1 and fit.cands[0].name in own:
+            min_red = own[fit.cands[0].name]
     fit.significant = bool(fit.score < _score(ssr0, n, 0, prob.horizon) - SCORE_MARGIN
                            and fit.reduction >= min_red and fit.z_vs_none >= prob.min_z)
     return fit
