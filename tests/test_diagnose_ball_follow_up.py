@@ -119,16 +119,24 @@ def test_r_comp_with_a_calibration_sized_pair_is_no_choice():
     """r_comp offsets both pairs; when one of them is inside the calibration tolerance
     (1 mm) that part is calibration and the other pair's contact_offset is the answer
     (draw 9039: a -2.33 mm table offset was named r_comp with 0.4 mm on the EE-ball pair)."""
-    from types import SimpleNamespace
-
     from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
     from adaptive_c3.tools.diagnosis.effects import Candidate
     from adaptive_c3.tools.diagnosis.fit import _calibration_sized
-    rc = [Candidate("r_comp", "all_pairs")]
-    assert _calibration_sized(SimpleNamespace(cands=rc, values=np.array([4e-4, -2.3e-3])))
-    assert not _calibration_sized(SimpleNamespace(cands=rc, values=np.array([2e-3, -2.3e-3])))
-    off = [Candidate("contact_offset", "ball_table")]
-    assert not _calibration_sized(SimpleNamespace(cands=off, values=np.array([4e-4])))
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.fit import Fit
+    spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
+
+    def fit(cands, values):
+        values = np.array(values)
+        return Fit(tuple(cands), values, np.zeros((len(values), 2)), np.zeros(len(values)), 0.0)
+    rc = Candidate("r_comp", "all_pairs")
+    assert _calibration_sized(fit([rc], [4e-4, -2.3e-3]), spec)
+    assert not _calibration_sized(fit([rc], [2e-3, -2.3e-3]), spec)
+    assert not _calibration_sized(fit([Candidate("contact_offset", "ball_table")], [4e-4]), spec)
+    force = Candidate("external_force", "ball_x")        # a small force is not an offset
+    assert not _calibration_sized(fit([rc, force], [2e-3, -2.3e-3, 4e-4]), spec)
+    assert _calibration_sized(fit([force, rc], [0.03, 2e-3, 5e-4]), spec)
     r = score_draw(9039, baseline=False)
     assert r["truth"]["name"] == "contact_offset" and r["named"], r["selected"]
     assert r["in_interval"], r["selected"]

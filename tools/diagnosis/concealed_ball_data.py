@@ -33,8 +33,8 @@ mm and rolls it along a min-jerk path of bounded peak acceleration (2-10 m/s^2: 
 mu = 1 neither contact slips, not even in the model's 4-edge friction pyramid; the
 EE-ball contact slips when its mu is below about 0.3), then lifts and hovers. The
 default push ends at rest, so the ball slows with the EE and its free coasts are short
-and slow; a release push (Excitation.release_speed) lifts off while moving. ONE push per episode
-(many short episodes): the EE lowers onto a ball at rest, never onto a rolling one
+and slow; a release push (Excitation.release_speed) lifts off while moving. ONE push
+per episode (many short episodes): the EE lowers onto a ball at rest, never onto a rolling one
 (touching down on a rolling ball slides the contact, where the Anitescu relaxation
 pushes the bodies apart: an artifact of the model that showed as a spurious
 friction_coefficient[ee_ball] on clean data). Side pushes are
@@ -352,14 +352,14 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: 
     row = _score(seed, rec, clean, truth, scenario, baseline, pairs, kw.get("vary", True))
     proposals = row.pop("proposals")
     if follow_up and row["verdict"] == "ambiguous" and proposals:
-        change = merge_changes(p["excitation"] for p in proposals)
+        change = merge_changes(p.get("excitation", {}) for p in proposals)
         kw2 = {k: v for k, v in kw.items() if k not in ("episodes", "duration_s")}
         rec2, _, clean2 = concealed_draw(seed, follow_up=change, **kw2)
         both = concat_recordings([rec, rec2])
         row2 = _score(seed, both, np.concatenate([clean, clean2]), truth, scenario, False,
                       pairs, kw.get("vary", True))
         row2.pop("proposals")
-        row["follow_up"] = dict(row2, excitation=change, seconds=row2["seconds"])
+        row["follow_up"] = dict(row2, excitation=change)
     return row
 
 

@@ -413,13 +413,13 @@ def _at_bound(f, c, spec, rel: float = 0.02) -> bool:
     return bool(np.any(f.values <= lo + rel * span) or np.any(f.values >= hi - rel * span))
 
 
-def _calibration_sized(f) -> bool:
-    """An r_comp fit with a pair offset within the calibration tolerance: that pair's
-    part is calibration (a nuisance), not an effect; the other pair's contact_offset
-    is the effect (chosen on its own merit), so r_comp is not a choice."""
+def _calibration_sized(f, spec) -> bool:
+    """A fit with an r_comp whose offset on some pair is within the calibration
+    tolerance: that pair's part is calibration (a nuisance), not an effect; the other
+    pair's contact_offset is the effect (chosen on its own merit), so it is no choice."""
     from adaptive_c3.tools.diagnosis.effects import CALIBRATION_TOLERANCE
-    return any(c.name == "r_comp" for c in f.cands) and \
-        bool(np.any(np.abs(f.values) < CALIBRATION_TOLERANCE))
+    return any(c.name == "r_comp" and np.any(np.abs(p) < CALIBRATION_TOLERANCE)
+               for c, p in f.effects(spec))
 
 
 def fit_nuisance(prob: Problem) -> list:
@@ -472,7 +472,7 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True, offset: int 
             if progress:
                 progress.update(offset + len(fits))
     if any(n == "calibration_offset" for n, _ in getattr(prob.spec, "nuisance", ())):
-        eligible = [f for f in eligible if not _calibration_sized(f)]
+        eligible = [f for f in eligible if not _calibration_sized(f, prob.spec)]
     chosen = _choose(eligible, getattr(prob.spec, "equal_reduction", 0.0))
     if chosen is not None:
         if not len(chosen.shift):
