@@ -151,6 +151,11 @@ def with_more_of_everything(text_change: tuple) -> tuple:
             {**DEFAULT_SEPARATION[1], **change})
 
 
+def against_none(effect: str) -> tuple:
+    """(text, gait change) that tells `effect` from the unmodified model."""
+    return with_more_of_everything(MORE_EVIDENCE.get(effect, DEFAULT_SEPARATION))
+
+
 def proposal(between: list, text_change: tuple) -> dict:
     """A separating_excitation entry: who it separates, the text, the gait change."""
     text, change = text_change
@@ -225,7 +230,7 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
         a, b = name(best), name(f)
         if "none" in (a, b):
             other = b if a == "none" else a
-            how = with_more_of_everything(MORE_EVIDENCE.get(other, DEFAULT_SEPARATION))
+            how = against_none(other)
         else:
             how = SEPARATING.get(frozenset({a, b}), DEFAULT_SEPARATION)
         proposals.append(proposal([row(best)["name"], row(f)["name"]],
@@ -309,10 +314,9 @@ def _join(judged, first: dict, other: dict) -> None:
     if not judged["ambiguous"]:
         judged["ambiguous"] = [first]
     judged["ambiguous"].append(other)
-    how = MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)
-    judged["separating_excitation"].append(proposal(
-        [first["name"], other["name"]],
-        with_more_of_everything(how) if first["name"] == "none" else how))
+    how = against_none(other["name"]) if first["name"] == "none" else \
+        MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)
+    judged["separating_excitation"].append(proposal([first["name"], other["name"]], how))
     judged["verdict"] = "ambiguous"
 
 
