@@ -119,9 +119,11 @@ def evidence_windows(spec, W, phases, gain, name: str, top: int = 5) -> dict:
 
 
 MORE_EVIDENCE = {        # effect -> (text, gait change) that gives it more evidence
-    "mass_scale": ("more pushes (25 episodes) at peak accelerations of 8-12 m/s^2: the "
-                   "ball's inertia shows in the EE's response to its known force",
-                   dict(peak_accel=[8.0, 12.0], episodes=25)),
+    "mass_scale": ("more pushes (25 episodes) that release the ball at 0.2-0.3 m/s: the "
+                   "EE speeds the ball up and lifts off while still moving, so the ball's "
+                   "inertia shows in the EE's response to its known force and the ball "
+                   "never rolls back into a stopped EE",
+                   dict(release_speed=[0.2, 0.3], episodes=25)),
     "friction_coefficient": ("pushes at 8-10 m/s^2 with a light press (3-4 mm): low "
                              "EE-ball friction shows as slip",
                              dict(peak_accel=[8.0, 10.0], press=[0.003, 0.004])),
@@ -194,7 +196,7 @@ def worse_z(family: int) -> float:
 
 
 def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = None,
-            gait: bool = True) -> dict:
+            gait: bool = True, own_reduction: dict | None = None) -> dict:
     """named | ambiguous | none, the ambiguous set (best first; None = the unmodified model)
     and, per competitor of the best, the excitation that would separate them.
 
@@ -203,12 +205,16 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
     the chosen one (paired z < worse_z(family), family: the single effects compared,
     by default those in fits); and `none` when the chosen fit's gain is not
     consistent across clusters (z < Z_AMBIG: a few events carry it). With nothing chosen,
-    singles with z >= Z_AMBIG and at least half the reduction a choice needs join `none`."""
+    singles with z >= Z_AMBIG and at least half the reduction a choice of them needs
+    (own_reduction: {effect: bar} where an effect has its own, else min_reduction) join
+    `none`."""
     physical = [f for f in fits if len(f.cands) == 1 and f.physical]
     z_worse = worse_z(len(physical) - 1 if family is None else family)
     singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG]
     if chosen is None:
-        near = [f for f in singles if f.reduction >= 0.5 * min_reduction]
+        own = own_reduction or {}
+        near = [f for f in singles
+                if f.reduction >= 0.5 * own.get(f.cands[0].name, min_reduction)]
         members = [None] + near if near else []
     else:
         members = [chosen] + [f for f in singles if f.cands != chosen.cands and _paired(
@@ -283,7 +289,8 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     anywhere, free-window near misses (FREE_NEAR_REDUCTION) join `none` in the set."""
     from adaptive_c3.tools.diagnosis.fit import select
     gait = bool(getattr(prob.spec, "free_ball", False))     # the ball's push gait
-    judged = verdict(fits, chosen, none_eval, min_reduction, gait=gait)
+    judged = verdict(fits, chosen, none_eval, min_reduction, gait=gait,
+                     own_reduction=getattr(prob.spec, "min_reduction_by_effect", None))
     family = sum(len(f.cands) == 1 and f.physical for f in fits) - 1
     sub = free_ball_problem(free_prob or prob) if gait else None
     if sub is None:
