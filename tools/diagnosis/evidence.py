@@ -208,13 +208,13 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
     singles with z >= Z_AMBIG and at least half the reduction a choice of them needs
     (own_reduction: {effect: bar} where an effect has its own, else min_reduction) join
     `none`."""
+    from adaptive_c3.tools.diagnosis.fit import reduction_bar
     physical = [f for f in fits if len(f.cands) == 1 and f.physical]
     z_worse = worse_z(len(physical) - 1 if family is None else family)
     singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG]
     if chosen is None:
-        own = own_reduction or {}
         near = [f for f in singles
-                if f.reduction >= 0.5 * own.get(f.cands[0].name, min_reduction)]
+                if f.reduction >= 0.5 * reduction_bar(own_reduction, f, min_reduction)]
         members = [None] + near if near else []
     else:
         members = [chosen] + [f for f in singles if f.cands != chosen.cands and _paired(

@@ -378,6 +378,13 @@ def paired_z(a: np.ndarray, b: np.ndarray) -> float:
     return float(d.mean() / se) if se > 0 else (np.inf if d.mean() > 0 else 0.0)
 
 
+def reduction_bar(by_effect: dict | None, fit: Fit, default: float) -> float:
+    """The held-out SSR cut a choice of `fit` needs: by_effect's bar for a single effect
+    that has its own (a spec's min_reduction_by_effect), else default."""
+    name = fit.cands[0].name if len(fit.cands) == 1 else None
+    return (by_effect or {}).get(name, default)
+
+
 def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
     ssr0, n, per0, _ = none_eval
     fit.test_ssr, fit.test_n, fit.test_cluster_ssr, fit.test_window_ssr = evaluate(prob, fit)
@@ -385,11 +392,9 @@ def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
     fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
     fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
     min_red = prob.min_reduction
-    if min_red is None:
-        min_red = getattr(prob.spec, "min_reduction", MIN_REDUCTION)   # per model (see spec)
-        own = getattr(prob.spec, "min_reduction_by_effect", {})        # ... and per effect
-        if len(fit.cands) == 1 and fit.cands[0].name in own:
-            min_red = own[fit.cands[0].name]
+    if min_red is None:                # per model (see spec), and per effect where it has one
+        min_red = reduction_bar(getattr(prob.spec, "min_reduction_by_effect", {}), fit,
+                                getattr(prob.spec, "min_reduction", MIN_REDUCTION))
     fit.significant = bool(fit.score < _score(ssr0, n, 0, prob.horizon) - SCORE_MARGIN
                            and fit.reduction >= min_red and fit.z_vs_none >= prob.min_z)
     return fit
