@@ -36,7 +36,8 @@ from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
 from adaptive_c3.tools.diagnosis.evidence import (evidence_windows, free_ball_verdict,
-                                                 widen_for_phases, window_phases)
+                                                  not_excluded, widen_for_phases,
+                                                  window_phases)
 from adaptive_c3.tools.diagnosis.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
                                              widen_for_nuisance)
 from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
@@ -235,6 +236,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
         prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION),
         free_prob=long_problem(rec, spec, prob, P0, sigma, stride))
+    not_excluded(judged, spec, fits, none_eval, fits_free)
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)

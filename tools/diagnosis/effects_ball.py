@@ -149,6 +149,19 @@ class BallSpec(SystemSpec):
     # rolling resistance, drag and a constant force are also fitted and judged on the
     # windows where the ball rolls or rests without the EE (tools/diagnosis/evidence.py)
     free_ball: bool = True
+    # The sizes that matter, (below, above) the effect's nominal value (by effect, or by
+    # effect[target]): a `none` stays confident only when every listed effect's 95 %
+    # interval on the recording stays within them; one whose interval reaches one is
+    # not excluded and joins `none` in the ambiguous set (evidence.not_excluded). The ball
+    # is ~10 % of the pushed inertia, so the default gait often leaves its mass open; a
+    # lower EE-ball mu shows only where a push slips (a higher one acts as the model's);
+    # drag and rolling resistance are never negative; a drag of 0.1 N*s/m takes ~25 % of
+    # a 0.2 m/s coast's speed in 0.5 s. Table mu is not listed: rolling from the top asks
+    # the table for at most ~0.1 of the normal force, so no push here can bound it.
+    relevant_size: dict = field(default_factory=lambda: {
+        "mass_scale": (0.2, 0.2), "friction_coefficient[ee_ball]": (0.5, np.inf),
+        "viscous_damping": (np.inf, 0.1), "rolling_resistance": (np.inf, 5e-4),
+        "external_force": (0.01, 0.01), "contact_offset": (1e-3, 1e-3)})
     cache: dict = field(default_factory=dict)
 
     def prepare(self, rec) -> None:

@@ -327,6 +327,41 @@ def _join(judged, first: dict, other: dict) -> None:
     judged["verdict"] = "ambiguous"
 
 
+def not_excluded(judged, spec, fits, none_eval, fits_free=()) -> None:
+    """A `none` (the verdict, or a member of the ambiguous set) claims that the data rule
+    out every effect of a size that matters (spec.relevant_size: (below, above) the
+    nominal value). A single physical effect whose 95 % interval reaches that far is as
+    consistent with the data as `none` is: it joins the set after `none`, with its
+    interval and the excitation that gives it more evidence. The free-ball effects are
+    read from their free-window fits where there are some (where they are judged)."""
+    sizes = getattr(spec, "relevant_size", None) or {}
+    amb = judged["ambiguous"]
+    if not sizes or not (judged["verdict"] == "none" or any(a["name"] == "none" for a in amb)):
+        return
+    free = {f.cands: f for f in fits_free if len(f.cands) == 1}
+    seen = {(a["name"], a["target"]) for a in amb}
+    for f in fits:
+        c = f.cands[0]
+        size = sizes.get(c.label(), sizes.get(c.name))
+        if len(f.cands) != 1 or not f.physical or size is None or (c.name, c.target) in seen:
+            continue
+        where = " (free windows)" if f.cands in free else ""
+        f = free.get(f.cands, f)
+        nominal, (lo, hi) = float(c.nominal(spec)[0]), np.asarray(f.ci, float)[0]
+        if not (nominal - lo >= size[0] or hi - nominal >= size[1]):
+            continue
+        seen.add((c.name, c.target))
+        if not judged["ambiguous"]:
+            judged["ambiguous"] = [fit_row(None, none_eval)]
+        judged["ambiguous"].append(dict(
+            fit_row(f, none_eval), ci95=[float(lo), float(hi)],
+            note=f"not excluded: its 95 % interval {lo:.3g}..{hi:.3g} reaches a size that "
+                 f"matters (the model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}){where}"))
+        judged["separating_excitation"].append(
+            proposal(["none", c.name], against_none(c.name)))
+        judged["verdict"] = "ambiguous"
+
+
 def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     """Model-form allowance on the chosen fit's interval: the estimate refitted (one
     Gauss-Newton step, fit.lin) on each phase's windows alone, over the phases holding

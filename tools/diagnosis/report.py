@@ -120,7 +120,8 @@ def ambiguity_summary(report) -> str:
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "
-                      f"(held-out {_fmt(a['held_out_score'])})" for a in report["ambiguous"])
+                      f"(held-out {_fmt(a['held_out_score'])}{_not_excluded(a)})"
+                      for a in report["ambiguous"])
     fix = "; ".join(f"{' vs '.join(p['between'])}: {p['change']}"
                     for p in report["separating_excitation"])
     gait = any("excitation" in p for p in report["separating_excitation"])
@@ -129,6 +130,15 @@ def ambiguity_summary(report) -> str:
                   f"them: {fix}. Record that{GAIT_NOTE if gait else ''} and diagnose both "
                   f"recordings together (`adaptive-c3 diagnose THIS.npz --also NEW.npz "
                   f"--scenario ...`).")
+
+
+
+def _not_excluded(member) -> str:
+    """The 95 % interval of a member that joined because `none` cannot rule it out."""
+    if "ci95" not in member:
+        return ""
+    lo, hi = member["ci95"]
+    return f"; not excluded: 95% interval {_fmt(lo)} to {_fmt(hi)}"
 
 
 GAIT_NOTE = " (separating_excitation[].excitation: the push gait's fields to change)"
