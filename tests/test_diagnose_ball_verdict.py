@@ -103,13 +103,15 @@ def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     assert judged["separating_excitation"][0]["excitation"]["release_speed"][0] > 0
     from adaptive_c3.tools.diagnosis.report import ambiguity_summary
     assert "not excluded: 95% interval 0.61 to 1.69" in ambiguity_summary(judged)
-    # the free-window fit is the one read for a free-ball effect
+    # a free-ball effect's interval is read from its free-window fit; its score is global
     drag_free = _fit("viscous_damping", "ball", mass.test_cluster_ssr, NONE)
     drag_free.ci[:] = [-0.02, 0.3]
     judged = verdict([drag], None, NONE_EVAL, 0.1)
     not_excluded(judged, spec, [drag], NONE_EVAL, [drag_free])
     assert [a["name"] for a in judged["ambiguous"]] == ["none", "viscous_damping"]
     assert "free windows" in judged["ambiguous"][1]["note"]
+    assert judged["ambiguous"][1]["ci95"] == [-0.02, 0.3]
+    assert judged["ambiguous"][1]["held_out_score"] == pytest.approx(np.sqrt(drag.test_ssr / 1000))
     # intervals inside the sizes that matter leave `none` confident
     mass.ci[:] = [0.85, 1.15]
     judged = verdict([mass, fric], None, NONE_EVAL, 0.1)

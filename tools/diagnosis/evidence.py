@@ -332,8 +332,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=()) -> None:
     out every effect of a size that matters (spec.relevant_size: (below, above) the
     nominal value). A single physical effect whose 95 % interval reaches that far is as
     consistent with the data as `none` is: it joins the set after `none`, with its
-    interval and the excitation that gives it more evidence. The free-ball effects are
-    read from their free-window fits where there are some (where they are judged)."""
+    interval and the excitation that gives it more evidence. The free-ball effects'
+    intervals are read from their free-window fits where there are some (where they are
+    judged); every held-out score in the set stays the one over all windows."""
     sizes = getattr(spec, "relevant_size", None) or {}
     amb = judged["ambiguous"]
     if not sizes or not (judged["verdict"] == "none" or any(a["name"] == "none" for a in amb)):
@@ -345,9 +346,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=()) -> None:
         size = sizes.get(c.label(), sizes.get(c.name))
         if len(f.cands) != 1 or not f.physical or size is None or (c.name, c.target) in seen:
             continue
-        where = " (free windows)" if f.cands in free else ""
-        f = free.get(f.cands, f)
-        nominal, (lo, hi) = float(c.nominal(spec)[0]), np.asarray(f.ci, float)[0]
+        where = " (the interval from the free windows)" if f.cands in free else ""
+        nominal = float(c.nominal(spec)[0])
+        lo, hi = np.asarray(free.get(f.cands, f).ci, float)[0]
         if not (nominal - lo >= size[0] or hi - nominal >= size[1]):
             continue
         seen.add((c.name, c.target))
