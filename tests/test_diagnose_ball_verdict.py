@@ -77,6 +77,18 @@ def test_near_miss_is_judged_against_the_effects_own_bar():
     assert verdict([fric], None, NONE_EVAL, 0.1, own_reduction=own)["verdict"] == "none"
 
 
+def test_an_effect_joins_the_set_once():
+    """Draw 9019 listed rolling resistance twice: a near miss on all windows and again
+    on the free windows."""
+    from adaptive_c3.tools.diagnosis.evidence import _join, fit_row
+    near = _fit("rolling_resistance", "ball_table", NONE - 7 + RNG.normal(0, 1, 30), NONE)
+    judged = verdict([near], None, NONE_EVAL, 0.1)
+    assert [a["name"] for a in judged["ambiguous"]] == ["none", "rolling_resistance"]
+    _join(judged, fit_row(None, NONE_EVAL), dict(fit_row(near, NONE_EVAL), note="free windows"))
+    assert [a["name"] for a in judged["ambiguous"]] == ["none", "rolling_resistance"]
+    assert len(judged["separating_excitation"]) == 1
+
+
 def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     """`none` claims the data exclude every effect of a size that matters. Clean
     calibration draw 201: mass 95 % interval 0.61-1.69 (nothing cut the held-out SSR);

@@ -317,7 +317,12 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
 
 
 def _join(judged, first: dict, other: dict) -> None:
-    """Make the verdict ambiguous between `first` (kept first) and `other`."""
+    """Make the verdict ambiguous between `first` (kept first) and `other` (once: an
+    effect already in the set, e.g. a near miss on all windows and on the free ones, is
+    not listed again)."""
+    if any((a["name"], a["target"]) == (other["name"], other["target"])
+           for a in judged["ambiguous"]):
+        return
     if not judged["ambiguous"]:
         judged["ambiguous"] = [first]
     judged["ambiguous"].append(other)
