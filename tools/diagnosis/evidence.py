@@ -346,10 +346,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=()) -> None:
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
     seen = {(a["name"], a["target"]) for a in amb}
-    for f in fits:
+    for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = sizes.get(c.label(), sizes.get(c.name))
-        if len(f.cands) != 1 or not f.physical or size is None or (c.name, c.target) in seen:
+        if size is None or (c.name, c.target) in seen:
             continue
         where = " (the interval from the free windows)" if f.cands in free else ""
         nominal = float(c.nominal(spec)[0])

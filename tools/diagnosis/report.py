@@ -132,7 +132,6 @@ def ambiguity_summary(report) -> str:
                   f"--scenario ...`).")
 
 
-
 def _not_excluded(member) -> str:
     """The 95 % interval of a member that joined because `none` cannot rule it out."""
     if "ci95" not in member:
