@@ -341,31 +341,24 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=()) -> None:
     intervals are read from their free-window fits where there are some (where they are
     judged); every held-out score in the set stays the one over all windows."""
     sizes = getattr(spec, "relevant_size", None) or {}
-    amb = judged["ambiguous"]
-    if not sizes or not (judged["verdict"] == "none" or any(a["name"] == "none" for a in amb)):
+    if not sizes or not (judged["verdict"] == "none"
+                         or any(a["name"] == "none" for a in judged["ambiguous"])):
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
-    seen = {(a["name"], a["target"]) for a in amb}
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = sizes.get(c.label(), sizes.get(c.name))
-        if size is None or (c.name, c.target) in seen:
+        if size is None:
             continue
         where = " (the interval from the free windows)" if f.cands in free else ""
         nominal = float(c.nominal(spec)[0])
         lo, hi = np.asarray(free.get(f.cands, f).ci, float)[0]
-        if not (nominal - lo >= size[0] or hi - nominal >= size[1]):
-            continue
-        seen.add((c.name, c.target))
-        if not judged["ambiguous"]:
-            judged["ambiguous"] = [fit_row(None, none_eval)]
-        judged["ambiguous"].append(dict(
-            fit_row(f, none_eval), ci95=[float(lo), float(hi)],
-            note=f"not excluded: its 95 % interval {lo:.3g}..{hi:.3g} reaches a size that "
-                 f"matters (the model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}){where}"))
-        judged["separating_excitation"].append(
-            proposal(["none", c.name], against_none(c.name)))
-        judged["verdict"] = "ambiguous"
+        if nominal - lo >= size[0] or hi - nominal >= size[1]:
+            _join(judged, fit_row(None, none_eval), dict(
+                fit_row(f, none_eval), ci95=[float(lo), float(hi)],
+                note=f"not excluded: its 95 % interval {lo:.3g}..{hi:.3g} reaches a size "
+                     f"that matters (the model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g})"
+                     f"{where}"))
 
 
 def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
