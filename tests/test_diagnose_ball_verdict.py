@@ -94,9 +94,8 @@ def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     calibration draw 201: mass 95 % interval 0.61-1.69 (nothing cut the held-out SSR);
     draws 8008 and 9010, balls 1.65x and 1.48x heavier, were reported a confident
     `none` with intervals 0.99-1.96 and 0.58-2.59."""
-    from adaptive_c3.scenarios.schema import load_scenario as load
     from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
-    spec = ball_spec(load(BALL)[0])
+    spec = ball_spec(load_scenario(BALL)[0])
     mass = _fit("mass_scale", "ball", NONE + RNG.normal(0, 1, 30), NONE)
     fric = _fit("friction_coefficient", "ee_ball", mass.test_cluster_ssr, NONE)
     table = _fit("friction_coefficient", "ball_table", mass.test_cluster_ssr, NONE)
