@@ -1,7 +1,7 @@
 """Typed scenario schemas, loaded with Drake's `yaml_load_typed`.
 
-A scenario file names its `task` (`cartpole` or `ball_rolling`); the task picks
-the schema. Scenarios may `include:` another file (path relative to the
+A scenario file names its `task` (`cartpole`, `ball_rolling` or `rigid_object`;
+required, in the file or one it includes); the task picks the schema. Scenarios may `include:` another file (path relative to the
 including file) and override any of its keys; `--set key.path=value` on the
 command line overrides last. All values are validated before anything is
 built: an unknown key, a wrong type or an out-of-range value raises
@@ -139,7 +139,13 @@ def load_scenario(path, overrides: list[str] = ()):
     for text in overrides:
         key, value = parse_override(text)
         apply_override(data, key, value)
-    task = data.get("task", "cartpole")
+    if not data:
+        raise ScenarioError(f"{path}: the scenario is empty (it needs at least 'task:', one of "
+                            f"{', '.join(sorted(TASKS))})")
+    if "task" not in data:
+        raise ScenarioError(f"{path}: no 'task:' (one of {', '.join(sorted(TASKS))}), "
+                            "in the file or a file it includes")
+    task = data["task"]
     if task not in TASKS:
         raise ScenarioError(f"unknown task '{task}' (known: {', '.join(sorted(TASKS))})")
     schema, validate = TASKS[task]
