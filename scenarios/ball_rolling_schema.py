@@ -112,6 +112,32 @@ class CameraConfig:
 
 
 @dc.dataclass
+class SafetyLimits:
+    """The 1 kHz impedance loop's safety layer (systems/franka/safety_monitor.py): a
+    breach is a safe stop (damping, then no more commands, exit code 3); the *_warn_*
+    rates only print a warning. Times on the loop's clock unless noted."""
+    status_gap_s: float = 0.05           # no new PANDA_STATUS for longer, or two statuses
+                                         # further apart (their utime, the driver's clock)
+    status_min_rate_hz: float = 500.0    # PANDA_STATUS over a rate window below this: stop
+    status_warn_rate_hz: float = 900.0   # ... below this: warning
+    plan_warn_rate_hz: float = 180.0     # EE_PLAN below this: warning (the planner sends
+                                         # one every 5 ms while it keeps real time)
+    rate_window_s: float = 0.2           # the window the rates are measured over
+    plan_max_age_s: float = 0.5          # the plan's utime this far behind the status's
+    ball_max_age_s: float = 0.25         # no usable BALL_ESTIMATE for longer (once one came)
+    saturation_s: float = 0.05           # a joint's torque at its limit for longer
+    joint_margin_deg: float = 2.0        # a joint closer than this to its limit (Panda's)
+    ee_speed_max: float = 1.0            # m/s, EE tip speed
+    workspace_min: List[float] = dc.field(default_factory=lambda: [0.25, -0.4, 0.0])
+    workspace_max: List[float] = dc.field(default_factory=lambda: [0.85, 0.4, 0.45])
+                                         # m, the box the EE tip must stay in, base frame
+    malformed_run: int = 10              # this many bad messages in a row on one channel
+    stop_ramp_s: float = 0.3             # damping commands (-kd v) for this long after a stop
+    stop_damping_scale: float = 1.0      # kd = this x the driver's [37.5 50 37.5 25 5 3.75 2.5]
+    warn_interval_s: float = 5.0         # at most one line per kind of warning this often
+
+
+@dc.dataclass
 class BallRollingScenario:
     task: str = "ball_rolling"
     name: str = "ball_rolling"
@@ -125,6 +151,7 @@ class BallRollingScenario:
     gait: Gait = dc.field(default_factory=Gait)
     impedance: ImpedanceGains = dc.field(default_factory=ImpedanceGains)
     camera: CameraConfig = dc.field(default_factory=CameraConfig)
+    safety: SafetyLimits = dc.field(default_factory=SafetyLimits)
     ball_start_angle_deg: float = 0.0   # where on the circle the ball starts (0 = +y of centre)
     sim_time_step: float = 0.001        # true plant step, s
     sim_duration_s: float = 60.0
@@ -182,8 +209,29 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
     need(16 <= s.camera.width <= 4096 and 16 <= s.camera.height <= 4096, "camera size out of range")
     need(0 < s.camera.filter_alpha <= 1, "camera.filter_alpha must be in (0, 1]")
     positive("sim_time_step", s.sim_time_step)
+    _validate_safety(s.safety, need, positive)
     if len(s.c3.q_diag) not in (0, 19):
         raise ScenarioError(f"c3.q_diag must have 19 entries for ball rolling, got {len(s.c3.q_diag)}")
+
+
+
+def _validate_safety(f: SafetyLimits, need, positive) -> None:
+    for key in ("status_gap_s", "rate_window_s", "plan_max_age_s", "ball_max_age_s",
+                "saturation_s", "joint_margin_deg", "ee_speed_max", "stop_ramp_s",
+                "warn_interval_s"):
+        positive(f"safety.{key}", getattr(f, key))
+    for key in ("status_min_rate_hz", "status_warn_rate_hz", "plan_warn_rate_hz"):
+        need(math.isfinite(getattr(f, key)) and getattr(f, key) >= 0,
+             f"safety.{key} must be >= 0, got {getattr(f, key)}")
+    need(f.status_min_rate_hz <= f.status_warn_rate_hz,
+         "safety.status_min_rate_hz must be <= safety.status_warn_rate_hz")
+    need(f.malformed_run >= 1, f"safety.malformed_run must be >= 1, got {f.malformed_run}")
+    need(math.isfinite(f.stop_damping_scale) and f.stop_damping_scale >= 1,
+         f"safety.stop_damping_scale must be >= 1 (the driver's own damping), got {f.stop_damping_scale}")
+    need(len(f.workspace_min) == 3 and len(f.workspace_max) == 3
+         and all(math.isfinite(a) and math.isfinite(b) and a < b
+                 for a, b in zip(f.workspace_min, f.workspace_max)),
+         "safety.workspace_min / workspace_max must be [x, y, z] with min < max")
 
 
 register_task("ball_rolling", BallRollingScenario, validate_ball_rolling)
