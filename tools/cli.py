@@ -46,7 +46,7 @@ def cmd_run(args) -> int:
     if args.seed is not None:
         overrides.append(f"seed={args.seed}")
     summary, out = run_scenario(resolve_scenario_path(args.scenario), args.out, overrides,
-                                meshcat=args.meshcat)
+                                meshcat=args.meshcat, meshcat_port=args.meshcat_port)
     print(json.dumps({k: summary[k] for k in summary if k in
                       ("scenario", "stabilised", "laps", "residual_final", "real_time_factor")},
                      default=float))
@@ -55,6 +55,10 @@ def cmd_run(args) -> int:
         wall = float(summary["wall_s"])
         print(f"wall time {int(wall // 60)}m{wall % 60:04.1f}s for {summary['sim_duration_s']:g} s "
               f"simulated: real-time factor {summary['sim_duration_s'] / wall:.2f}")
+    if summary.get("interrupted"):
+        print(f"adaptive-c3 run: interrupted at t = {summary['sim_duration_s']:.2f} s; "
+              f"partial results in {out}", file=sys.stderr)
+        return 130
     return 0
 
 
@@ -90,7 +94,13 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", default=None, help="output folder (default runs/<scenario>-<time>)")
     run.add_argument("--set", action="append", metavar="KEY.PATH=VALUE",
                      help="override a scenario key; the value is parsed as YAML (repeatable)")
-    run.add_argument("--meshcat", action="store_true", help="visualise in Meshcat on localhost")
+    run.add_argument("--meshcat", action="store_true",
+                     help="interactive, in real time, in Meshcat on localhost: sliders for the "
+                     "model error, learning rate and target, buttons Adaptation on/off, Restart, "
+                     "Stop (ball_rolling)")
+    run.add_argument("--meshcat-port", type=int, default=None, metavar="PORT",
+                     help="Meshcat's port on localhost (implies --meshcat; default: the first "
+                     "free port from 7000)")
     run.add_argument("--seed", type=int, default=None, help="random seed (overrides the scenario's)")
     run.set_defaults(func=cmd_run)
 
@@ -125,17 +135,30 @@ def build_parser() -> argparse.ArgumentParser:
     diag.add_argument("--workers", type=int, default=2, help="rigid_object: processes (default 2)")
     diag.add_argument("--effects", default=None,
                       help="rigid_object: comma-separated effects to try (default: the whole library)")
+    diag.add_argument("--model", default="lcs", metavar="lcs|drake",
+                      help="rigid_object: the model diagnosed - lcs, the controller's Anitescu LCS "
+                      "(default), or drake, Drake's SAP plant of the scenario's true world")
+    diag.add_argument("--initial-state", default="ballistic", metavar="ballistic|first-row",
+                      help="rigid_object: rollout starts - a fit of each episode's free-flight "
+                      "prefix (default) or its recorded first row")
     diag.set_defaults(func=_delegate("adaptive_c3.tools.diagnosis.diagnose", "cmd_diagnose"))
 
     ev = sub.add_parser("evaluate", help="open-loop rollouts of a scenario's model against a recording",
                         description="Rolls the scenario's model out from every episode's first state "
-                        "and reports position (%% of the object's size) and orientation (deg) errors; "
+                        "and reports position (% of the object's size) and orientation (deg) errors; "
                         "writes evaluate.json and evaluate.png.")
     ev.add_argument("recording")
     ev.add_argument("--scenario", required=True)
     ev.add_argument("--out", default=None, help="output folder (default runs/evaluate)")
-    ev.add_argument("--baseline", choices=["drake"], default=None,
-                    help="also run Drake's own simulation of the scenario (SAP)")
+    ev.add_argument("--model", default="lcs", metavar="lcs|drake",
+                    help="the model rolled out: lcs, the controller's Anitescu LCS (default), or "
+                    "drake, Drake's SAP plant of the scenario's true world")
+    ev.add_argument("--baseline", default=None, metavar="drake|lcs",
+                    help="also roll out this backend from the same starts")
+    ev.add_argument("--initial-state", default="ballistic", metavar="ballistic|first-row",
+                    help="rollout starts: a fit of each episode's free-flight prefix (default) "
+                    "or its recorded first row")
+    ev.add_argument("--workers", type=int, default=2, help="processes for the rollouts (default 2)")
     ev.add_argument("--episodes", default=None, help="episode ids, e.g. 0-99,120 (default: all)")
     ev.add_argument("--set", action="append", metavar="KEY.PATH=VALUE", help="override a scenario key")
     ev.set_defaults(func=_delegate("adaptive_c3.tools.diagnosis.evaluate", "cmd_evaluate"))

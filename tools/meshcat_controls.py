@@ -1,17 +1,18 @@
 """Interactive Meshcat controls for the ball-rolling run (`adaptive-c3 run ... --meshcat`).
 
 `MeshcatControls` puts on Drake's Meshcat page (served on localhost by `start_meshcat`):
-  sliders  "model error [mm]"          the injected ball-radius error (model - true);
-                                       a structural change: applied by "Restart"
-           "learning rate"             the residual learner's Adam step (live)
-           "target radius [m]"         the target circle's radius (live)
-           "target lead [deg]"         how far the target leads the ball along the
-                                       circle - the rolling speed (live)
-           "learned offset [mm]"       display only: the learned EE-ball gap offset
-                                       (mean r_comp of the EE-ball rows x planning dt)
-  buttons  "Adaptation on/off"         toggles learning (the learner's enable port)
-           "Restart"                   rebuilds the run with the slider's model error
-           "Stop"                      ends the run (results are written as usual)
+  sliders  "ball err [mm]"       the injected ball-radius error (model - true);
+                                 a structural change: applied by "Restart"
+           "learning rate"       the residual learner's Adam step (live)
+           "circle r [m]"        the target circle's radius (live)
+           "lead [deg]"          how far the target leads the ball along the
+                                 circle - the rolling speed (live)
+           "learned [mm]"        display only: the learned EE-ball gap offset
+                                 (mean r_comp of the EE-ball rows x planning dt)
+  buttons  "Adaptation on/off"   toggles learning (the learner's enable port)
+           "Restart"             rebuilds the run with the slider's model error
+           "Stop"                ends the run (results are written for the time simulated)
+The slider names fit Meshcat's name column (about 94 px at 11 px type) with their units.
 and draws the current C3 plan (EE and ball positions over the horizon) as two lines.
 
 It works between simulator steps on a built BallRollingDiagram (it does not add
@@ -26,20 +27,33 @@ import time
 
 import numpy as np
 
-ERROR_SLIDER = "model error [mm]"
+from adaptive_c3.tools.sim_loop import advance
+
+ERROR_SLIDER = "ball err [mm]"
 LR_SLIDER = "learning rate"
-RADIUS_SLIDER = "target radius [m]"
-LEAD_SLIDER = "target lead [deg]"
-OFFSET_DISPLAY = "learned offset [mm]"
+RADIUS_SLIDER = "circle r [m]"
+LEAD_SLIDER = "lead [deg]"
+OFFSET_DISPLAY = "learned [mm]"
 ADAPT_BUTTON = "Adaptation on/off"
 RESTART_BUTTON = "Restart"
 STOP_BUTTON = "Stop"
 
 
 def start_meshcat(port: int | None = None):
-    """A Meshcat server bound to localhost (not all interfaces: nothing outside the machine can drive it)."""
+    """A Meshcat server bound to localhost (not all interfaces: nothing outside the machine
+    can drive it), on `port` or, with None, the first free port from Drake's 7000."""
     from pydrake.geometry import Meshcat, MeshcatParams
-    return Meshcat(MeshcatParams(host="localhost", port=port))
+
+    from adaptive_c3.tools.user_input import UserError
+    if port is not None and not 1 <= int(port) <= 65535:
+        raise UserError(f"--meshcat-port must be 1-65535, got {port}")
+    try:
+        return Meshcat(MeshcatParams(host="localhost", port=port))
+    except RuntimeError as e:
+        if port is None:
+            raise
+        raise UserError(f"Meshcat could not open port {port} on localhost ({e}); "
+                        "choose another --meshcat-port or leave it out for the first free one")
 
 
 class MeshcatControls:
@@ -142,8 +156,9 @@ class MeshcatControls:
 def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate: float = 1.0,
                          chunk_s: float = 0.05, controls: MeshcatControls | None = None):
     """The interactive run loop: simulate in chunks, polling the controls between them;
-    "Restart" rebuilds with the sliders' settings, "Stop" ends. Returns (handles, logs,
-    wall seconds) of the last episode, like simulate_ball_rolling."""
+    "Restart" rebuilds with the sliders' settings, "Stop" (or Ctrl-C) ends. Returns
+    (handles, logs, wall seconds) of the last episode, like simulate_ball_rolling, with
+    `handles.sim_end` saying how far it got and how it ended."""
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
@@ -159,28 +174,21 @@ def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate
         sim.Initialize()
         controls.attach(handles, context)
         start = time.perf_counter()
-        t, T, restart = 0.0, s.sim_duration_s, False
-        while t < T - 1e-12:
-            t = min(t + chunk_s, T)
-            sim.AdvanceTo(t)
+
+        def poll(_t):
             req = controls.apply()
             controls.show()
-            if req["stop"]:
-                break
-            if req["restart"]:
-                restart = True
-                break
+            return "stopped" if req["stop"] else "restart" if req["restart"] else None
+        handles.sim_end = advance(sim, s.sim_duration_s, chunk_s, after_chunk=poll)
+        restart = handles.sim_end.reason == "restart"
         wall = time.perf_counter() - start
         if not restart:
             break
         s = controls.scenario_for_restart()
         if progress:
             print(f"restart: model error {1e3 * s.model.radius_error:.1f} mm", flush=True)
-    logs = {}
-    for name, sink in handles.logs.items():
-        log = sink.FindLog(context)
-        logs[name] = (log.sample_times().copy(), log.data().T.copy())
-    return handles, logs, wall
+    from adaptive_c3.tools.run_ball_rolling import read_logs
+    return handles, read_logs(handles, context), wall
 
 
 __all__ = ["MeshcatControls", "simulate_interactive", "start_meshcat"]

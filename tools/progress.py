@@ -34,8 +34,10 @@ class Progress:
                          f"elapsed {elapsed:.0f}s eta {eta:.0f}s ")
         sys.stderr.flush()
 
-    def close(self) -> None:
+    def close(self, done: float | None = None) -> None:
+        """End the bar at `done` (default: the total)."""
         if self.enabled:
-            self.update(self.total)
+            self._last = -1.0
+            self.update(self.total if done is None else done)
             sys.stderr.write("\n")
             sys.stderr.flush()

@@ -117,8 +117,11 @@ def _validate(a: dict, where: str, allow_nonfinite: bool = False) -> None:
         if not np.issubdtype(a[key].dtype, np.number):
             raise RecordingError(f"{where}: '{key}' is not numeric")
         if not allow_nonfinite and not np.all(np.isfinite(a[key])):
-            bad = np.argwhere(~np.isfinite(a[key]))[0]
-            raise RecordingError(f"{where}: '{key}' has non-finite values (first at index {tuple(bad)})")
+            bad = [int(i) for i in np.argwhere(~np.isfinite(a[key]))[0]]
+            names = {"x": a["state_names"], "u": a["input_names"]}.get(key)
+            column = f", {str(names[bad[1]])}" if names is not None else ""
+            raise RecordingError(f"{where}: '{key}' has non-finite values (first at {key}"
+                                 f"[{', '.join(map(str, bad))}]: sample {bad[0]}{column})")
     ep = a.get("episode")
     if ep is not None and (ep.shape != (T,) or not np.issubdtype(ep.dtype, np.integer)):
         raise RecordingError(f"{where}: episode must be [T={T}] integers, got {ep.shape} {ep.dtype}")

@@ -19,13 +19,16 @@ from adaptive_c3.systems.rolling.gait import PHASES
 from adaptive_c3.tools.process_tuning import frozen_heap
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
+from adaptive_c3.tools.sim_loop import advance, ending_fields
 
 CONTACT_TOL_M = 0.001   # true EE-ball distance counted as contact
 BAND = 0.5              # laps count only within +-BAND * radius of the circle
 
 
 def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
-    """Simulate; returns (handles, logs dict name -> (t, data), wall seconds)."""
+    """Simulate; returns (handles, logs dict name -> (t, data), wall seconds).
+    `handles.sim_end` (tools/sim_loop.SimEnd) says how far it got and how it ended (Ctrl-C
+    ends the simulation, not the process)."""
     handles = build_ball_rolling_diagram(scenario, meshcat=meshcat)
     simulator = Simulator(handles.diagram)
     context = simulator.get_mutable_context()
@@ -34,18 +37,23 @@ def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
     bar = Progress(T, f"ball rolling [{scenario.name}]", enabled=None if progress else False)
     with frozen_heap():
         start = time.perf_counter()
-        t, chunk = 0.0, max(T / 100, 0.05)
-        while t < T - 1e-12:
-            t = min(t + chunk, T)
-            simulator.AdvanceTo(t)
-            bar.update(t)
+        handles.sim_end = advance(simulator, T, max(T / 100, 0.05), bar=bar)
         wall = time.perf_counter() - start
-    bar.close()
+    bar.close(handles.sim_end.t)
+    return handles, read_logs(handles, context), wall
+
+
+def read_logs(handles, context) -> dict:
+    """The diagram's log sinks as name -> (t [T], data [T, n]). Raises KeyboardInterrupt
+    when a Ctrl-C came before anything was logged (there is nothing to write)."""
     logs = {}
     for name, sink in handles.logs.items():
         log = sink.FindLog(context)
         logs[name] = (log.sample_times().copy(), log.data().T.copy())
-    return handles, logs, wall
+    end = getattr(handles, "sim_end", None)
+    if end is not None and end.reason == "interrupted" and len(logs["lcs_state"][0]) == 0:
+        raise KeyboardInterrupt
+    return logs
 
 
 def off_table(position) -> bool:
@@ -123,10 +131,11 @@ def rolling_metrics(logs, scenario, true_radius: float) -> dict:
     }
 
 
-def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = False) -> dict:
+def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = False,
+                     meshcat_port: int | None = None) -> dict:
     if meshcat:   # interactive: localhost, sliders + buttons (tools/meshcat_controls.py)
         from adaptive_c3.tools.meshcat_controls import simulate_interactive, start_meshcat
-        mc = start_meshcat()
+        mc = start_meshcat(meshcat_port)
         print(f"Meshcat: {mc.web_url()}", flush=True)
         handles, logs, wall = simulate_interactive(scenario, mc)
     else:
@@ -135,16 +144,13 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
     _, u = logs["lcs_input"]
     _, r = logs["r_comp"]
     _, loss = logs["loss"]
-    T = scenario.sim_duration_s
     dt = scenario.model.planning_dt
     half = len(handles.lambda_names) // 2
     summary = {
         "scenario": scenario.name,
         "task": "ball_rolling",
         "robot": scenario.robot,
-        "sim_duration_s": T,
-        "wall_s": wall,
-        "real_time_factor": T / wall if wall > 0 else None,
+        **ending_fields(getattr(handles, "sim_end", None), scenario.sim_duration_s, wall),
         "final_state": x[-1].tolist(),
         "state_names": list(STATE_NAMES),
         "object": scenario.model.object,
@@ -175,6 +181,10 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
     return summary
 
 
+def laps_text(laps: int) -> str:
+    return f"{laps} lap" if laps == 1 else f"{laps} laps"
+
+
 def plot_ball_rolling(out: Path, logs, handles, scenario, summary) -> list[Path]:
     import matplotlib
     matplotlib.use("Agg")
@@ -192,12 +202,23 @@ def plot_ball_rolling(out: Path, logs, handles, scenario, summary) -> list[Path]
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     on = "on" if scenario.learner.enabled else "off"
-    ax.set_title(f"{scenario.name}: adaptation {on}, {summary['laps']} laps")
+    ax.set_title(f"{scenario.name}: adaptation {on}, {laps_text(summary['laps'])}")
     ax.legend(loc="upper right", fontsize=7)
     path_png = out / "path.png"
     fig.savefig(path_png, dpi=120, bbox_inches="tight")
     plt.close(fig)
 
+    fig = residual_figure(logs, scenario, summary)
+    res_png = out / "residual.png"
+    fig.savefig(res_png, dpi=120, bbox_inches="tight")
+    plt.close(fig)
+    return [path_png, res_png]
+
+
+def residual_figure(logs, scenario, summary):
+    """The learned gap offsets (top) and the violation loss (bottom) over time, with the
+    first EE-ball contact as a vertical line (named in the top legend)."""
+    import matplotlib.pyplot as plt
     tr, r = logs["r_comp"]
     tl, loss = logs["loss"]
     half = r.shape[1] // 2
@@ -207,15 +228,14 @@ def plot_ball_rolling(out: Path, logs, handles, scenario, summary) -> list[Path]
     axes[0].plot(tr, 1e3 * dt * r[:, half:].mean(axis=1), label="ball-table (learned)")
     axes[0].axhline(2e3 * scenario.model.radius_error, color="k", ls="--", lw=0.8,
                     label="EE-ball on top: 2 x radius error")
-    if summary["first_contact_s"] is not None:
-        for ax in axes:
-            ax.axvline(summary["first_contact_s"], color="tab:green", lw=0.8)
+    axes[1].semilogy(tl, np.maximum(loss[:, 0], 1e-12))
+    t_contact = summary["first_contact_s"]
+    if t_contact is not None:
+        axes[0].axvline(t_contact, color="tab:green", lw=0.8,
+                        label=f"first EE-ball contact ({t_contact:.2f} s)")
+        axes[1].axvline(t_contact, color="tab:green", lw=0.8)
     axes[0].set_ylabel("gap offset r dt [mm]")
     axes[0].legend(fontsize=7)
-    axes[1].semilogy(tl, np.maximum(loss[:, 0], 1e-12))
     axes[1].set_ylabel("violation loss")
     axes[1].set_xlabel("t [s]")
-    res_png = out / "residual.png"
-    fig.savefig(res_png, dpi=120, bbox_inches="tight")
-    plt.close(fig)
-    return [path_png, res_png]
+    return fig

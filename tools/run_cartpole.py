@@ -10,6 +10,7 @@ from pydrake.systems.analysis import Simulator
 from adaptive_c3.diagrams.cartpole import CARTPOLE_Q, CARTPOLE_R, build_cartpole_diagram
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
+from adaptive_c3.tools.sim_loop import advance, ending_fields
 
 
 def _log(logger, context):
@@ -34,6 +35,8 @@ def closed_loop_cost(x, u, q_diag, r_diag, dt) -> float:
 
 def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None):
     """Simulate the scenario; returns (handles, logs dict name -> (t, data), wall seconds).
+    `handles.sim_end` (tools/sim_loop.SimEnd) says how far it got and how it ended (Ctrl-C
+    ends the simulation, not the process).
 
     model_lcs (optional) replaces the controller's model LCS (see build_cartpole_diagram)."""
     handles = build_cartpole_diagram(scenario, model_lcs)
@@ -44,15 +47,13 @@ def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None):
     simulator.Initialize()
     bar = Progress(scenario.sim_duration_s, progress_label)
     start = time.perf_counter()
-    chunk = max(scenario.sim_duration_s / 50, 0.01)
-    t = 0.0
-    while t < scenario.sim_duration_s - 1e-12:
-        t = min(t + chunk, scenario.sim_duration_s)
-        simulator.AdvanceTo(t)
-        bar.update(t)
+    handles.sim_end = advance(simulator, scenario.sim_duration_s,
+                              max(scenario.sim_duration_s / 50, 0.01), bar=bar)
     wall = time.perf_counter() - start
-    bar.close()
+    bar.close(handles.sim_end.t)
     logs = {name: _log(logger, context) for name, logger in handles.loggers.items()}
+    if handles.sim_end.reason == "interrupted" and len(logs["x"][0]) == 0:
+        raise KeyboardInterrupt   # nothing simulated yet: nothing to write
     return handles, logs, wall
 
 
@@ -72,9 +73,7 @@ def run_cartpole(scenario, scenario_text: str, out: Path) -> dict:
         "scenario": scenario.name,
         "task": "cartpole",
         "controller": ("lqr on the no-contact model" if scenario.controller == "lqr" else "c3"),
-        "sim_duration_s": scenario.sim_duration_s,
-        "wall_s": wall,
-        "real_time_factor": scenario.sim_duration_s / wall if wall > 0 else None,
+        **ending_fields(handles.sim_end, scenario.sim_duration_s, wall),
         "initial_state": list(scenario.initial_state),
         "final_state": x[-1].tolist(),
         "state_names": list(handles.state_names),

@@ -13,8 +13,10 @@ A sweep file:
     success: [initiated, one_circle, four_circles]     # boolean summary keys to rate
 
 Every trial runs in its own folder `OUT/trials/<cell>/<trial>/` and is done when
-its `summary.json` exists (written last, atomically), so an interrupted sweep
-restarted with the same folder runs only what is missing. `results.csv` (one row
+its `summary.json` exists (written last, atomically) and does not say `interrupted`,
+so an interrupted sweep restarted with the same folder runs only what is missing.
+Ctrl-C cancels the queued trials, ends the running ones (each writes what it simulated,
+marked interrupted) and writes results.csv and summary.json for what finished. `results.csv` (one row
 per trial) and `summary.json` (per-cell success rates with 95% Wilson intervals)
 are rebuilt from the trial folders after every run.
 
@@ -31,6 +33,7 @@ import json
 import math
 import os
 import random
+import signal
 import sys
 import time
 import traceback
@@ -135,23 +138,62 @@ def plan_trials(plan: dict) -> list:
 
 
 # ------------------------------------------------------------------ one trial
+_worker = {"running": False, "stop": False}   # a pool worker's Ctrl-C state
+
+
+def _worker_init():
+    """A pool worker: Ctrl-C interrupts the trial it is running (once; the trial then
+    writes its partial results) and makes an idle worker refuse further trials."""
+    from adaptive_c3.tools.process_tuning import tune_allocator
+    tune_allocator()
+    signal.signal(signal.SIGINT, _worker_sigint)
+
+
+def _worker_sigint(signum, frame):
+    _worker["stop"] = True
+    if _worker["running"]:
+        _worker["running"] = False
+        raise KeyboardInterrupt
+
+
 def run_trial(scenario: str, trial: dict, out_dir: str) -> dict:
     """Run one trial in its folder (in whatever process or cluster worker this is)."""
     from adaptive_c3.tools.run import run_scenario
+    if _worker["stop"]:
+        return {"status": "cancelled"}
     folder = Path(out_dir) / trial["folder"]
     folder.mkdir(parents=True, exist_ok=True)
     os.environ.setdefault("ADAPTIVE_C3_PROGRESS", "0")
+    _worker["running"] = True
     try:
         summary, _ = run_scenario(scenario, folder, trial["overrides"])
         (folder / "error.txt").unlink(missing_ok=True)
+        if summary.get("interrupted"):
+            return {"status": "interrupted"}
         return {"status": "ok", "summary": summary}
+    except KeyboardInterrupt:
+        return {"status": "interrupted"}
     except Exception as e:  # recorded, the sweep goes on; the trial reruns on resume
         (folder / "error.txt").write_text(traceback.format_exc())
         return {"status": "error", "error": f"{type(e).__name__}: {e}"}
+    finally:
+        _worker["running"] = False
+
+
+def _trial_status(folder: Path) -> str:
+    """ok (summary.json of a run that finished), interrupted, error or missing."""
+    summary = folder / "summary.json"
+    if summary.is_file():
+        try:
+            interrupted = json.loads(summary.read_text()).get("interrupted", False)
+        except (OSError, ValueError):
+            return "error"
+        return "interrupted" if interrupted else "ok"
+    return "error" if (folder / "error.txt").is_file() else "missing"
 
 
 def trial_done(out: Path, trial: dict) -> bool:
-    return (out / trial["folder"] / "summary.json").is_file()
+    return _trial_status(out / trial["folder"]) == "ok"
 
 
 # ------------------------------------------------------------------ running
@@ -186,18 +228,25 @@ def run_sweep(plan: dict, out, workers: int = 1, cluster: str | None = None,
     done = len(trials) - len(todo)
     bar.update(done)
     start = time.perf_counter()
-    errors = []
-    for result in _execute(plan["scenario"], todo, out, workers, cluster):
-        done += 1
-        bar.update(done)
-        if result["status"] != "ok":
-            errors.append(result["error"])
-    bar.close()
+    errors, ran, interrupted = [], 0, False
+    try:
+        for result in _execute(plan["scenario"], todo, out, workers, cluster):
+            if result["status"] in ("interrupted", "cancelled"):
+                interrupted = True
+                break
+            done += 1
+            ran += 1
+            bar.update(done)
+            if result["status"] != "ok":
+                errors.append(result["error"])
+    except KeyboardInterrupt:
+        interrupted = True
+    bar.close(done)
     wall = time.perf_counter() - start
     summary = collect(plan, out)
-    summary.update(ran_now=len(todo), errors_now=len(errors), wall_s=wall,
-                   trials_per_hour=(len(todo) / wall * 3600 if todo and wall > 0 else None),
-                   workers=workers, cluster=cluster)
+    summary.update(ran_now=ran, errors_now=len(errors), wall_s=wall,
+                   trials_per_hour=(ran / wall * 3600 if ran and wall > 0 else None),
+                   workers=workers, cluster=cluster, interrupted=interrupted)
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float))
     return summary
 
@@ -209,23 +258,43 @@ def _execute(scenario, todo, out: Path, workers: int, cluster):
         except ImportError:
             raise SweepError("--cluster needs dask[distributed] installed")
         client = Client(cluster)
+        futures = []
         try:
             futures = [client.submit(run_trial, scenario, t, str(out), pure=False) for t in todo]
             for fut in dask_completed(futures):
                 yield fut.result()
         finally:
+            client.cancel([f for f in futures if not f.done()])
             client.close()
     elif workers <= 1:
         for t in todo:
             yield run_trial(scenario, t, str(out))
     else:
         import multiprocessing as mp
-        from adaptive_c3.tools.process_tuning import tune_allocator
-        with ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
-                                 initializer=tune_allocator) as pool:
+        pool = ProcessPoolExecutor(max_workers=workers, mp_context=mp.get_context("spawn"),
+                                   initializer=_worker_init)
+        futures, finished = [], False
+        try:
             futures = [pool.submit(run_trial, scenario, t, str(out)) for t in todo]
             for fut in as_completed(futures):
                 yield fut.result()
+            finished = True
+        finally:
+            if not finished:   # Ctrl-C (or the caller stopped): queued trials never start
+                for f in futures:
+                    f.cancel()
+                _interrupt_workers(pool)
+            pool.shutdown(wait=True, cancel_futures=True)
+
+
+def _interrupt_workers(pool) -> None:
+    """Ctrl-C for the pool's workers (a terminal sends it to them too; `kill -INT` of
+    the sweep alone does not): each ends its trial, writing what it simulated."""
+    for proc in list((getattr(pool, "_processes", None) or {}).values()):
+        try:
+            os.kill(proc.pid, signal.SIGINT)
+        except (ProcessLookupError, OSError):
+            pass
 
 
 # ------------------------------------------------------------------ results
@@ -251,13 +320,10 @@ def collect(plan: dict, out: Path) -> dict:
         folder = out / t["folder"]
         row = {"cell": t["cell_id"], "trial": t["trial"], "seed": t["seed"], **t["cell"],
                **{f"drawn.{k}": v for k, v in t["drawn"].items()}}
-        if (folder / "summary.json").is_file():
-            row["status"] = "ok"
+        status = _trial_status(folder)
+        if status in ("ok", "interrupted"):
             row.update(_scalar_fields(json.loads((folder / "summary.json").read_text())))
-        elif (folder / "error.txt").is_file():
-            row["status"] = "error"
-        else:
-            row["status"] = "missing"
+        row["status"] = status
         rows.append(row)
     columns = list(dict.fromkeys(k for r in rows for k in r))
     with open(out / "results.csv", "w", newline="") as f:
@@ -292,6 +358,11 @@ def cmd_sweep(args) -> int:
         raise UserError(f"--workers must be >= 1, got {args.workers}")
     out = Path(args.out) if args.out else Path("runs") / f"sweep-{plan['name']}"
     summary = run_sweep(plan, out, workers=args.workers, cluster=args.cluster)
+    if summary["interrupted"]:
+        print(f"adaptive-c3 sweep: interrupted; {summary['completed']}/{summary['total_trials']} "
+              f"trials finished, results.csv and summary.json in {out} (run the same command "
+              "again to resume)", file=sys.stderr)
+        return 130
     from adaptive_c3.tools.sweep_paths import plot_sweep_paths
     figure = plot_sweep_paths(plan, out, plan_trials(plan))
     for cid, c in summary["cells"].items():

@@ -11,7 +11,8 @@ import numpy as np
 
 
 def _trial_path(folder: Path):
-    """(ball xy [T, 2], summary) of one trial, or None when it has no ball-rolling log."""
+    """(ball xy [T, 2], summary) of one finished trial, or None when it has no ball-rolling
+    log or was interrupted."""
     log, summ = folder / "log.npz", folder / "summary.json"
     if not (log.is_file() and summ.is_file()):
         return None
@@ -19,7 +20,8 @@ def _trial_path(folder: Path):
         if "ball_true" not in d.files:
             return None
         ball = np.asarray(d["ball_true"], float)
-    return ball[:, 4:6], json.loads(summ.read_text())
+    summary = json.loads(summ.read_text())
+    return None if summary.get("interrupted") else (ball[:, 4:6], summary)
 
 
 def plot_sweep_paths(plan: dict, out: Path, trials: list) -> Path | None:

@@ -1,0 +1,58 @@
+"""The run loop every `adaptive-c3 run` task shares: advance a Drake Simulator in chunks
+to the scenario's duration, and say how far it got and why it ended.
+
+A run ends "completed" (the scenario's sim_duration_s reached), "stopped" (Meshcat's
+Stop button) or "interrupted" (Ctrl-C). Ctrl-C ends the loop instead of the process, so
+the runner still writes log.npz and summary.json for what was simulated; the summary's
+`sim_duration_s` is the simulated time reached, not the scenario's request.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+ENDINGS = ("completed", "stopped", "interrupted")
+
+
+@dataclass
+class SimEnd:
+    """How a simulation loop ended: `t` the simulated time reached (s), `reason` one of
+    ENDINGS."""
+    t: float
+    reason: str = "completed"
+
+
+def advance(simulator, duration: float, chunk: float, after_chunk=None, bar=None) -> SimEnd:
+    """AdvanceTo(duration) in steps of `chunk` seconds; `bar.update(t)` after each.
+    `after_chunk(t)` may return a reason ("stopped", or anything the caller handles, e.g.
+    "restart") to end early. Ctrl-C ends the loop with reason "interrupted"; the
+    simulator's logs then hold what was simulated up to that point."""
+    t = simulator.get_context().get_time()
+    reason = "completed"
+    try:
+        while t < duration - 1e-12:
+            t = min(t + chunk, duration)
+            simulator.AdvanceTo(t)
+            if bar is not None:
+                bar.update(t)
+            if after_chunk is not None:
+                request = after_chunk(t)
+                if request:
+                    reason = request
+                    break
+    except KeyboardInterrupt:
+        reason = "interrupted"
+    return SimEnd(float(simulator.get_context().get_time()), reason)
+
+
+def ending_fields(end: SimEnd | None, requested_s: float, wall_s: float) -> dict:
+    """The summary.json fields that say how long the run simulated and how it ended:
+    sim_duration_s (reached), sim_duration_requested_s, ended, interrupted,
+    real_time_factor (reached / wall)."""
+    reached = float(requested_s if end is None else end.t)
+    reason = "completed" if end is None else end.reason
+    return {"sim_duration_s": reached, "sim_duration_requested_s": float(requested_s),
+            "ended": reason, "interrupted": reason == "interrupted",
+            "wall_s": wall_s, "real_time_factor": reached / wall_s if wall_s > 0 else None}
+
+
+__all__ = ["ENDINGS", "SimEnd", "advance", "ending_fields"]
