@@ -34,6 +34,7 @@ from adaptive_c3.diagrams.ball_rolling_camera import add_ball_camera
 from adaptive_c3.diagrams.ball_rolling_world import (ball_start_xy, make_gait, start_states,
                                                      true_radius, true_world)
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
+from adaptive_c3.systems.contact.anitescu_lcs import OPEN_PAIR_TOL
 from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
 from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
 from adaptive_c3.systems.rolling.estimator import BallRollingEstimator
@@ -215,6 +216,8 @@ def add_ball_rolling_controller(builder, s: BallRollingScenario, ee_state, ee_fo
     # one linearizer: the three LCS systems (planning dt, loop period, learner dt) update
     # together at the same state and share its evaluation there
     lin = ball_rolling_linearizer(dt=m.planning_dt, **lin_kwargs)
+    if m.open_pair_gate:      # no friction on a pair out of reach (anitescu_lcs.py)
+        lin.open_pair_tol = OPEN_PAIR_TOL
     lcs_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start))
     loop_sys = builder.AddSystem(AnitescuLcsSystem(lin, s.c3.rate_hz, initial_state=x_start,
                                                    dt=1.0 / s.c3.rate_hz))

@@ -29,6 +29,10 @@ class RollingModel:
                                      # steps shrink Anitescu's sliding artefact (a sliding
                                      # contact separates by mu |v_slip| dt in the model),
                                      # which the learner would read as a gap offset
+    open_pair_gate: bool = False     # true: an open pair out of one step's reach gets no
+                                     # friction rows in the LCS (Anitescu's relaxed cone
+                                     # otherwise lets an open pair push or brake: issue 30;
+                                     # AnitescuLinearizer.open_pair_tol = OPEN_PAIR_TOL)
     learner_input: str = "motion"    # applied: the impedance's tip force + the model EE's
                                      # weight; motion: the force that reproduces the EE's
                                      # measured motion on the model EE

@@ -26,6 +26,14 @@ Units and conventions:
   t1 is world x projected onto the contact plane (world y when n is near ±x) and
   t2 = n × t1; edge j has direction d_j = cos(2πj/n_e) t1 + sin(2πj/n_e) t2, so for
   n_e = 4 the edges are +t1, +t2, −t1, −t2. λ is ordered pair by pair, edge by edge.
+- Open pairs (`open_pair_tol`): Anitescu's relaxed cone lets an OPEN pair act. Edge
+  row j, φ/dt + J_n v + μ d_jᵀ J_t v >= 0, binds while φ < dt (μ |v_t| − v_n), so a
+  body sliding past another a few mm away is pushed or braked (at dt = 0.01 s and
+  0.4 m/s of slip, ~4 mm of reach). With `open_pair_tol` set (m), a pair out of reach
+  at the nominal point, φ > dt max(0, −J_n v*) + open_pair_tol (it does not close
+  within the step at its approach speed), keeps only its non-penetration rows (μ = 0 in
+  its J_c rows): no friction; closed and closing pairs are unchanged. None (default)
+  = the paper's model.
 - Geometry (φ, witness points, J_n, J_t) comes from the double plant's SceneGraph
   (ComputeSignedDistancePairClosestPoints) and CalcJacobianTranslationalVelocity;
   only M and the bias term go through AutoDiff (one pass, reused contexts).
@@ -41,6 +49,9 @@ from pydrake.geometry import GeometryId, Role
 from pydrake.multibody.tree import JacobianWrtVariable, MultibodyForces_
 
 from adaptive_c3.systems.contact.lcs import Lcs
+
+
+OPEN_PAIR_TOL = 5e-4   # m, the default gap tolerance of the open-pair gate (module doc)
 
 
 @dataclass(frozen=True)
@@ -78,7 +89,7 @@ class AnitescuLinearizer:
     """
 
     def __init__(self, diagram, plant, contact_pairs, num_edges: int = 4,
-                 dt: float = 0.1, eps_c: float = 1e-2):
+                 dt: float = 0.1, eps_c: float = 1e-2, open_pair_tol: float | None = None):
         if int(num_edges) < 2:
             raise ValueError(f"num_edges must be >= 2, got {num_edges}")
         if not (np.isfinite(dt) and dt > 0):
@@ -87,6 +98,10 @@ class AnitescuLinearizer:
             raise ValueError(f"eps_c must be > 0 (F positive definite), got {eps_c}")
         if not contact_pairs:
             raise ValueError("at least one contact pair is needed")
+        if open_pair_tol is not None and not (np.isfinite(open_pair_tol)
+                                              and open_pair_tol >= 0):
+            raise ValueError(f"open_pair_tol must be >= 0 m or None, got {open_pair_tol}")
+        self.open_pair_tol = None if open_pair_tol is None else float(open_pair_tol)
         self.plant = plant
         self.num_edges = int(num_edges)
         self.dt = float(dt)
@@ -278,7 +293,11 @@ class AnitescuLinearizer:
         nq, nv, nx, nu = self.nq, self.nv, self.nx, self.nu
         f, J_f, M, M_inv, phi, J_n, J_t, normals, N, N_plus = self._point_terms(x, u)
         q_star = x[:nq]
-        J_c = self._E_t.T @ J_n + self._mu_edges[:, None] * J_t
+        mu_e = self._mu_edges
+        if self.open_pair_tol is not None:    # pairs that cannot touch within the step
+            far = phi - dt * np.maximum(0.0, -(J_n @ x[nq:])) > self.open_pair_tol
+            mu_e = np.where(np.repeat(far, self.num_edges), 0.0, mu_e)
+        J_c = self._E_t.T @ J_n + mu_e[:, None] * J_t
         MinvJcT = M_inv @ J_c.T
         Jf_q, Jf_v, Jf_u = J_f[:, :nq], J_f[:, nq:nx], J_f[:, nx:]
         d_v = f - J_f @ np.concatenate([x, u])
