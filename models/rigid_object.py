@@ -21,7 +21,9 @@ import itertools
 from dataclasses import dataclass
 
 import numpy as np
-from pydrake.geometry import AddContactMaterial, HalfSpace, ProximityProperties, Sphere
+from pydrake.geometry import (AddCompliantHydroelasticProperties, AddContactMaterial,
+                              AddRigidHydroelasticProperties, HalfSpace, ProximityProperties,
+                              Sphere)
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
@@ -77,11 +79,18 @@ class RigidObjectPlant:
 def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
                              point_stiffness: float | None = None,
                              relaxation_time: float | None = None,
-                             friction: float | None = None) -> RigidObjectPlant:
+                             friction: float | None = None,
+                             hydroelastic_modulus: float | None = None,
+                             add_systems=None) -> RigidObjectPlant:
     """The box + table plant. time_step 0: continuous (for the linearizer); > 0: SAP.
-    point_stiffness (N/m) and relaxation_time (s, SAP's dissipation) None: Drake's defaults."""
+    point_stiffness (N/m) and relaxation_time (s, SAP's dissipation) None: Drake's defaults.
+    hydroelastic_modulus (Pa): hydroelastic contact with compliant corner spheres against a
+    rigid table (None: point contact). add_systems(builder, plant, body), if given, adds
+    systems (e.g. force elements) to the diagram before it is built."""
     builder = DiagramBuilder()
-    config = MultibodyPlantConfig(time_step=float(time_step), contact_model="point",
+    hydro = hydroelastic_modulus is not None
+    config = MultibodyPlantConfig(time_step=float(time_step),
+                                  contact_model="hydroelastic_with_fallback" if hydro else "point",
                                   discrete_contact_approximation="sap" if time_step > 0 else "")
     plant, _ = AddMultibodyPlant(config, builder)
     plant.set_name("rigid_object_plant")
@@ -90,6 +99,10 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     AddContactMaterial(props, point_stiffness=point_stiffness, friction=CoulombFriction(mu, mu))
     if relaxation_time is not None:
         props.AddProperty("material", "relaxation_time", float(relaxation_time))
+    table_props = ProximityProperties(props)
+    if hydro:
+        AddCompliantHydroelasticProperties(params.corner_radius, float(hydroelastic_modulus), props)
+        AddRigidHydroelasticProperties(table_props)
 
     unit = UnitInertia(*(np.asarray(params.inertia_diag) / params.mass))
     body = plant.AddRigidBody(BODY_NAME, SpatialInertia(params.mass, np.zeros(3), unit))
@@ -97,13 +110,15 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     pairs = []
     table = plant.RegisterCollisionGeometry(
         plant.world_body(), RigidTransform([0.0, 0.0, params.table_height]), HalfSpace(),
-        "table", props)
+        "table", table_props)
     for i, signs in enumerate(itertools.product((-1.0, 1.0), repeat=3)):
         centre = np.asarray(signs) * (np.asarray(params.half_size) - r)
         corner = plant.RegisterCollisionGeometry(body, RigidTransform(centre), Sphere(r),
                                                  f"corner{i}", props)
         pairs.append(ContactPair(f"corner{i}_table", corner, table, params.friction))
     plant.Finalize()
+    if add_systems is not None:
+        add_systems(builder, plant, body)
     diagram = builder.Build()
     return RigidObjectPlant(diagram, plant, body, pairs)
 

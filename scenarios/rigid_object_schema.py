@@ -46,11 +46,18 @@ class ModelPatch:
 
 @dc.dataclass
 class DrakeBaseline:
-    """Drake's own MultibodyPlant simulation of the scenario (`evaluate --baseline drake`)."""
-    time_step: float = 0.0           # s; 0 = the recording's step
+    """The true-world simulation of the scenario: Drake's MultibodyPlant with SAP (`evaluate
+    --model drake`, `diagnose --model drake`), geometry, mass and inertia from `body`,
+    `contact` and the geometry/inertia keys of `patch`."""
+    time_step: float = 0.0           # s; 0 = the recording's step / 4
+    contact_model: str = "point"     # "point" or "hydroelastic" (compliant corner spheres)
     point_stiffness: float = 0.0     # N/m; 0 = Drake's default
+    hydroelastic_modulus: float = 1.0e7   # Pa, the corner spheres' (contact_model hydroelastic)
     relaxation_time: float = 0.0     # s, SAP's dissipation time scale; 0 = Drake's default
-    friction: float = -1.0           # < 0 = contact.friction
+    friction: float = -1.0           # < 0 = contact.friction (SAP uses one coefficient)
+    viscous_drag: float = 0.0        # N s/m, force -c v on the body's centre (world)
+    angular_drag: float = 0.0        # N m s, torque -c w (world)
+    external_force: List[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])  # N, world
 
 
 @dc.dataclass
@@ -100,6 +107,14 @@ def validate_rigid_object(s: RigidObjectScenario) -> None:
     need(finite(d.point_stiffness) and d.point_stiffness >= 0, "drake.point_stiffness must be >= 0")
     need(finite(d.relaxation_time) and d.relaxation_time >= 0, "drake.relaxation_time must be >= 0")
     need(finite(d.friction), "drake.friction must be finite")
+    need(d.contact_model in ("point", "hydroelastic"),
+         f"drake.contact_model must be point or hydroelastic, got {d.contact_model!r}")
+    need(finite(d.hydroelastic_modulus) and d.hydroelastic_modulus > 0,
+         "drake.hydroelastic_modulus must be > 0")
+    need(finite(d.viscous_drag) and d.viscous_drag >= 0, "drake.viscous_drag must be >= 0")
+    need(finite(d.angular_drag) and d.angular_drag >= 0, "drake.angular_drag must be >= 0")
+    need(len(d.external_force) == 3 and all(finite(v) for v in d.external_force),
+         f"drake.external_force must be 3 finite values (N), got {d.external_force}")
 
 
 register_task("rigid_object", RigidObjectScenario, validate_rigid_object)

@@ -325,6 +325,10 @@ def cmd_diagnose(args) -> int:
     if scenario.task == "rigid_object":
         from adaptive_c3.tools.diagnosis.rigid_diagnose import cmd_diagnose_rigid
         return cmd_diagnose_rigid(args, scenario, text, rec)
+    if (getattr(args, "model", None) or "lcs") != "lcs":
+        from adaptive_c3.tools.user_input import UserError
+        raise UserError(f"--model {args.model}: only the lcs model is diagnosed for "
+                        f"task {scenario.task} so far (--model drake: rigid_object scenarios)")
     spec = model_spec(scenario)
     check_recording(rec, spec)
     out = Path(args.out) if args.out else Path("runs") / (

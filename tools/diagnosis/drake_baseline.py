@@ -1,25 +1,9 @@
-"""Drake's own simulation of a rigid_object scenario: the baseline that `evaluate
---baseline drake` rolls out beside the model's Anitescu LCS (rigid_model.py).
-
-The plant is models/rigid_object.py's, as a discrete MultibodyPlant with SAP:
-- geometry: the box's eight corner spheres (radius contact.corner_radius, their surfaces
-  reaching the box's corners) against the table's half space at the (patched) table
-  height; point contact; mass, inertia and size from `body` and `patch` (patch effects
-  that act on the LCS - restitution, r_comp, damping terms - have no counterpart here);
-- time step: drake.time_step, 0 = the recording's dt. A time step below dt is simulated
-  in substeps and sampled at multiples of dt (zero-order hold: the state after the last
-  discrete update at or before k dt);
-- friction: drake.friction (static = dynamic), < 0 = contact.friction;
-- stiffness: drake.point_stiffness (N/m, given to every geometry; Drake combines the two
-  of a pair in series, so a corner-table pair gets half of it), 0 = Drake's default. At
-  the cube's dt of 1/148 s the default sits in SAP's near-rigid regime: any stiffness
-  >= 1e4 N/m gives the same trajectories to the last bit;
-- dissipation: SAP models it with a linear Kelvin-Voigt term of relaxation time
-  drake.relaxation_time (s), 0 = Drake's default (0.1 s). (SAP ignores a Hunt & Crossley
-  dissipation: identical trajectories for 0 and 50 s/m, so it is not a knob here.)
-
-`tune_drake` fits the `drake` knobs to recorded episodes (coarse log grid, then
-Nelder-Mead) by the median over episodes of the mean position error.
+"""Tuning Drake's contact knobs to recordings: `tune_drake` fits the `drake` knobs of a
+rigid_object scenario (friction, point stiffness, relaxation time) to recorded episodes
+(coarse log grid, then Nelder-Mead) by the median over episodes of the mean position
+error. The simulator itself is tools/diagnosis/drake_backend.py's (the `drake` model
+backend); it is imported here under its old name for the callers of this module.
+At the cube's dt of 1/148 s the default point stiffness sits in SAP's near-rigid regime.
 """
 from __future__ import annotations
 
@@ -28,11 +12,8 @@ import dataclasses
 import math
 
 import numpy as np
-from pydrake.systems.analysis import Simulator
 
-from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
-from adaptive_c3.models.rigid_object import (RigidObjectParams, build_rigid_object_plant,
-                                             plant_state, recording_state)
+from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator  # noqa: F401
 
 KNOBS = ("friction", "point_stiffness", "relaxation_time")
 # search ranges of the knobs (schema units), searched on a log scale
@@ -40,63 +21,6 @@ KNOB_RANGES = {"friction": (0.02, 1.0),                   # mu
                "point_stiffness": (3.0e2, 1.0e5),         # N/m
                "relaxation_time": (1.0e-3, 1.0)}          # s
 MAX_TUNE_EPISODES = 40
-
-
-class DrakeRigidSimulator:
-    """Rollouts of Drake's SAP simulation of a rigid_object scenario, sampled every dt (s).
-
-    The plant (8 corner spheres vs the table's half space, point contact, SAP; see the
-    module docstring for the defaults) is built once; its Simulator and context are
-    reused by every rollout (reset to the initial context, time 0)."""
-
-    def __init__(self, scenario, dt: float):
-        silence_half_space_deformable_warning()
-        if not dt > 0:
-            raise ValueError(f"dt must be > 0, got {dt}")
-        self.scenario = scenario
-        self.params = RigidObjectParams.from_scenario(scenario)
-        self.dt = float(dt)
-        d = scenario.drake
-        self.time_step = float(d.time_step) if d.time_step > 0 else self.dt
-        self.friction = float(d.friction) if d.friction >= 0 else self.params.friction
-        self.point_stiffness = float(d.point_stiffness) if d.point_stiffness > 0 else None
-        self.relaxation_time = float(d.relaxation_time) if d.relaxation_time > 0 else None
-        self.model = build_rigid_object_plant(
-            self.params, self.time_step, point_stiffness=self.point_stiffness,
-            relaxation_time=self.relaxation_time, friction=self.friction)
-        self.plant = self.model.plant
-        self.context = self.model.diagram.CreateDefaultContext()
-        self.plant_context = self.plant.GetMyMutableContextFromRoot(self.context)
-        self._initial = self.context.Clone()
-        self.simulator = Simulator(self.model.diagram, self.context)
-
-    @property
-    def size(self) -> float:
-        return self.params.size
-
-    def updates_before(self, num_steps: int) -> np.ndarray:
-        """For k = 1..num_steps, the number of discrete updates (at 0, h, 2h, ...) that
-        precede the sample at k dt: those strictly before it, an update within 1e-9 h of
-        k dt counting as at k dt (so time_step = dt gives k)."""
-        k = np.arange(1, num_steps + 1)
-        return np.ceil(k * self.dt / self.time_step - 1e-9).astype(int)
-
-    def rollout(self, x0_rec: np.ndarray, num_steps: int) -> np.ndarray:
-        """States [num_steps + 1, 13] in the recording layout from the recording-layout x0
-        (its quaternion normalised), sampled at k dt."""
-        x0 = np.asarray(x0_rec, float)
-        if x0.shape != (13,):
-            raise ValueError(f"x0 must have 13 entries (recording layout), got {x0.shape}")
-        self.context.SetTimeStateAndParametersFrom(self._initial)
-        self.plant.SetPositionsAndVelocities(self.plant_context, plant_state(x0))
-        self.simulator.Initialize()
-        out = np.empty((num_steps + 1, 13))
-        out[0] = self.plant.GetPositionsAndVelocities(self.plant_context)
-        for k, n in enumerate(self.updates_before(num_steps), start=1):
-            if n > 0:   # half way between updates n - 1 and n: no float tie with an event
-                self.simulator.AdvanceTo((n - 0.5) * self.time_step)
-            out[k] = self.plant.GetPositionsAndVelocities(self.plant_context)
-        return recording_state(out)
 
 
 # ---------------------------------------------------------------------- tuning

@@ -1,16 +1,20 @@
-"""`adaptive-c3 evaluate RECORDING --scenario S`: how well the scenario's model predicts
-a recording, open loop.
+"""`adaptive-c3 evaluate RECORDING --scenario S [--model lcs|drake]`: how well a model of
+the scenario predicts a recording, open loop.
 
-For every episode the model is rolled out from the episode's first state for the
-episode's whole length (re-linearised every step, at the recording's step) and
-compared with the recording sample by sample:
+`--model` picks the backend (tools/diagnosis/model_backend.py): `lcs`, the controller's
+Anitescu LCS re-linearised every step at the recording's step (default), or `drake`,
+Drake's SAP MultibodyPlant of the scenario's true world at a finer step. Every episode is
+rolled out for its whole length from a start estimated from its first rows
+(`--initial-state`, tools/diagnosis/initial_state.py: `ballistic`, a fit of the
+free-flight prefix, default; `first-row`, the recorded first row), the same start for
+every model compared, and compared with the recording sample by sample:
   position_pct_mean / _final   |p_model - p_data| as % of the object's size (its longest
                                edge), averaged over the episode / at its last sample
   orientation_deg_mean / _final  the angle of the rotation between the two orientations
 Each is summarised over episodes as median, mean and 90th percentile
-(`summary.<model>.<metric>_median`, `_mean`, `_p90`). `--baseline drake` adds Drake's
-own simulation of the same scenario (tools/diagnosis/drake_baseline.py) under
-`summary.drake`. Writes DIR/evaluate.json and DIR/evaluate.png.
+(`summary.model.<metric>_median`, `_mean`, `_p90`; `model` names the backend).
+`--baseline lcs|drake` adds the other backend under `summary.<name>`. Rollouts run on
+`--workers` processes. Writes DIR/evaluate.json and DIR/evaluate.png.
 
 Supports `task: rigid_object` scenarios (models/rigid_object.py's recording layout).
 """
@@ -73,45 +77,54 @@ def summarise(per_episode: list[dict]) -> dict:
     return out
 
 
-def make_predictor(name: str, scenario, dt: float):
-    """rollout(x0, num_steps) -> [num_steps + 1, 13] for 'model' (the LCS) or 'drake'."""
-    if name == "model":
-        from adaptive_c3.tools.diagnosis.rigid_model import RigidObjectModel
-        sim = RigidObjectModel(scenario, dt)
-    elif name == "drake":
-        from adaptive_c3.tools.diagnosis.drake_baseline import DrakeRigidSimulator
-        sim = DrakeRigidSimulator(scenario, dt)
-    else:
-        raise UserError(f"unknown baseline '{name}' (known: drake)")
-    return sim.rollout
-
-
 def evaluate(rec, scenario, baselines=(), episode_ids=None, progress: bool = True,
-             keep_rollouts: int = 4) -> dict:
-    """The evaluation dict (per episode, summary, a few rollouts for the figure)."""
+             keep_rollouts: int = 4, model: str = "lcs", initial_state: str = "ballistic",
+             workers: int = 2) -> dict:
+    """The evaluation dict (per episode, summary, a few rollouts for the figure): the
+    scenario's `model` backend under summary key "model", each baseline backend under its
+    name, every one rolled out from the same estimated start of each episode."""
+    from adaptive_c3.models.rigid_object import RigidObjectParams
+    from adaptive_c3.tools.diagnosis.initial_state import METHODS, initial_states
+    from adaptive_c3.tools.diagnosis.model_backend import Scorer, check_model
     if scenario.task != "rigid_object":
         raise UserError(f"evaluate supports task rigid_object scenarios, not '{scenario.task}'")
+    check_model(model)
+    for b in baselines:
+        check_model(b)
+    if initial_state not in METHODS:
+        raise UserError(f"unknown --initial-state '{initial_state}' (known: {', '.join(METHODS)})")
     episodes, dt = recording_episodes(rec, episode_ids)
-    result = {"recording_dt_s": dt, "episodes": list(episodes), "per_episode": {},
-              "summary": {}, "rollouts": {}}
-    from adaptive_c3.models.rigid_object import RigidObjectParams
-    size = RigidObjectParams.from_scenario(scenario).size
-    shown = list(episodes)[:keep_rollouts]
-    for name in ("model", *baselines):
-        rollout = make_predictor(name, scenario, dt)
-        bar = Progress(len(episodes), label=f"evaluate {name}", unit="episodes",
+    params = RigidObjectParams.from_scenario(scenario)
+    size = params.size
+    ids = list(episodes)
+    xs = [episodes[e][1] for e in ids]
+    starts = initial_states(dict(zip(ids, xs)), dt, initial_state, params.half_size,
+                            params.table_height)
+    result = {"recording_dt_s": dt, "episodes": ids, "per_episode": {}, "summary": {},
+              "rollouts": {}, "model": model, "baselines": list(baselines),
+              "initial_state": initial_state}
+    shown = ids[:keep_rollouts]
+    for tag, name in [("model", model)] + [(b, b) for b in baselines if b != model]:
+        scorer = Scorer(xs, dt, size, workers, name, [starts[e] for e in ids])
+        bar = Progress(len(ids), label=f"evaluate {name}", unit="episodes",
                        enabled=None if progress else False)
+        try:
+            _, (x_hats,) = scorer.run([scenario], keep=True,
+                                      progress=lambda i, n: bar.update(len(ids) * i / n))
+        finally:
+            bar.close()
+            scorer.close()
         rows = []
-        for i, (e, (t, x)) in enumerate(episodes.items()):
-            x_hat = rollout(x[0], len(x) - 1)
+        for e, x, x_hat in zip(ids, xs, x_hats):
+            if x_hat is None:
+                raise UserError(f"the {name} model failed to roll out episode {e}")
             rows.append({"episode": e, **episode_errors(x_hat, x, size)})
             if e in shown:
-                result["rollouts"].setdefault(str(e), {"t": t.tolist(), "data": x[:, :7].tolist()})
-                result["rollouts"][str(e)][name] = x_hat[:, :7].tolist()
-            bar.update(i + 1)
-        bar.close()
-        result["per_episode"][name] = rows
-        result["summary"][name] = summarise(rows)
+                result["rollouts"].setdefault(str(e), {"t": episodes[e][0].tolist(),
+                                                       "data": x[:, :7].tolist()})
+                result["rollouts"][str(e)][tag] = x_hat[:, :7].tolist()
+        result["per_episode"][tag] = rows
+        result["summary"][tag] = summarise(rows)
     result["object_size_m"] = size
     return result
 
@@ -130,7 +143,7 @@ def plot_evaluation(result: dict, path: Path) -> None:
         ax = axes[0, j]
         ax.plot(t, np.asarray(r["data"])[:, 2], "k.", ms=3, label="data")
         for name in names:
-            ax.plot(t, np.asarray(r[name])[:, 2], label=name)
+            ax.plot(t, np.asarray(r[name])[:, 2], label=_label(result, name))
         ax.set_title(f"episode {e}: centre height")
         ax.set_xlabel("t [s]")
         ax.set_ylabel("z [m]")
@@ -139,17 +152,21 @@ def plot_evaluation(result: dict, path: Path) -> None:
         axes[0, j].axis("off")
     ax = axes[1, 0]
     data = [[row["position_pct_mean"] for row in result["per_episode"][n]] for n in names]
-    ax.boxplot(data, tick_labels=names)
+    ax.boxplot(data, tick_labels=[_label(result, n) for n in names])
     ax.set_ylabel("mean position error [% of size]")
     ax = axes[1, 1]
     data = [[row["orientation_deg_mean"] for row in result["per_episode"][n]] for n in names]
-    ax.boxplot(data, tick_labels=names)
+    ax.boxplot(data, tick_labels=[_label(result, n) for n in names])
     ax.set_ylabel("mean orientation error [deg]")
     for j in range(2, axes.shape[1]):
         axes[1, j].axis("off")
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)
+
+
+def _label(result: dict, tag: str) -> str:
+    return f"{result.get('model', 'lcs')} (model)" if tag == "model" else tag
 
 
 def parse_episodes(spec: str | None) -> list[int] | None:
@@ -172,8 +189,15 @@ def cmd_evaluate(args) -> int:
     from adaptive_c3.tools.user_input import resolve_scenario_path
     scenario, _ = load_scenario(resolve_scenario_path(args.scenario), list(args.set or []))
     rec = load_recording(args.recording)
-    baselines = [args.baseline] if args.baseline else []
-    result = evaluate(rec, scenario, baselines, parse_episodes(args.episodes))
+    from adaptive_c3.tools.diagnosis.model_backend import check_model
+    model = check_model(getattr(args, "model", None) or "lcs")
+    baselines = [check_model(args.baseline)] if args.baseline else []
+    workers = int(getattr(args, "workers", None) or 2)
+    if workers < 1:
+        raise UserError(f"--workers must be >= 1, got {workers}")
+    result = evaluate(rec, scenario, baselines, parse_episodes(args.episodes), model=model,
+                      initial_state=getattr(args, "initial_state", None) or "ballistic",
+                      workers=workers)
     out = Path(args.out or "runs/evaluate")
     out.mkdir(parents=True, exist_ok=True)
     result.update(recording=str(args.recording), scenario=str(args.scenario))
@@ -183,6 +207,7 @@ def cmd_evaluate(args) -> int:
                      f"episode means), final {s['position_pct_final_median']:.1f} %, orientation "
                      f"{s['orientation_deg_mean_median']:.1f} deg"
                      for n, s in result["summary"].items())
-    print(f"{len(result['episodes'])} episodes - {line}")
+    print(f"{len(result['episodes'])} episodes, model {result['model']}, start "
+          f"{result['initial_state']} - {line}")
     print(f"results in {out}: evaluate.json, evaluate.png")
     return 0

@@ -1,7 +1,12 @@
-"""`diagnose` for rigid_object scenarios: where a recording of a tossed body and the rigid
-model (tools/diagnosis/rigid_model.py) disagree, which physics the model left out, and
-how much better the patched model predicts held-out episodes.
+"""`diagnose` for rigid_object scenarios: where a recording of a tossed body and a model
+of it disagree, which physics the model left out, and how much better the patched model
+predicts held-out episodes.
 
+The model is a backend of tools/diagnosis/model_backend.py (`--model`): `lcs`, the
+controller's Anitescu LCS (rigid_model.py), or `drake`, Drake's SAP plant of the
+scenario's true world (drake_backend.py). Each has its effect library
+(rigid_effects.py); effects are parameter changes, nuisances (compliance, calibration)
+are labelled as such.
 1. Split by episode (tools/diagnosis/episodes.py): held-out (never used to choose or fit
    anything), and the rest into a fit part and a validation part; twin episodes (copies
    up to a yaw and a shift) always land on one side together.
@@ -9,137 +14,44 @@ how much better the patched model predicts held-out episodes.
    are labelled flight / impact / sliding / rest from the data (lowest corner height,
    speeds), and runs of samples whose one-step velocity error exceeds 3x the flight
    phase's error (the sensing noise floor) are reported as mismatch windows, with the
-   contact-mode agreement (model impulse > 0 vs data in contact and off-ballistic).
-3. Effects (EFFECTS): each is fitted alone on the fit episodes by a grid over its value,
+   contact-mode agreement (model impulse or contact > 0 vs data in contact and
+   off-ballistic).
+3. Effects: each is fitted alone on the fit episodes by a grid over its value,
    refined by a parabola, with a 95% interval from bootstrapping episodes. Greedy forward
    selection: the effect that lowers the fit error most is kept only if it also lowers
    the validation episodes' error, with a bootstrap 95% interval of the paired
    improvement above zero and at least MIN_GAIN relative; then the next one is tried
    with the kept ones in place (at most MAX_EFFECTS). That is the over-fitting guard:
    every added effect must pay on episodes it was not fitted on.
-4. The held-out episodes are rolled out with the nominal and the patched model; the
-   patched scenario is written with the chosen values in its `contact` / `patch` keys.
+4. The held-out episodes are rolled out with the nominal and the patched model (with the
+   bootstrap interval of the paired per-episode drop); the patched scenario is written
+   with the chosen values in its keys.
 The score is the one `evaluate` reports: an episode's mean-over-time position error as
-% of the object's size, from a full open-loop rollout from the episode's first state.
+% of the object's size, from a full open-loop rollout from the episode's start, estimated
+by tools/diagnosis/initial_state.py (`--initial-state`), the same for every model.
+Rollouts run on `workers` processes.
 """
 from __future__ import annotations
 
-import copy
-import multiprocessing
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
 from adaptive_c3.models.rigid_object import RigidObjectParams
-from adaptive_c3.tools.diagnosis.rigid_model import key_value
 from adaptive_c3.tools.diagnosis.episodes import find_twins, split_episodes, twin_groups
 from adaptive_c3.tools.diagnosis.evaluate import (episode_errors, recording_episodes,
                                                   summarise)
+from adaptive_c3.tools.diagnosis.model_backend import FAILED_SCORE, Scorer, check_model
+from adaptive_c3.tools.diagnosis.rigid_effects import (EFFECTS, current_value, library,
+                                                       not_identifiable, with_values)
 from adaptive_c3.tools.progress import Progress
+
+__all__ = ["EFFECTS", "FAILED_SCORE", "diagnose_rigid", "with_values", "refine_minimum",
+           "bootstrap_interval", "paired_gain"]
 
 MAX_EFFECTS = 3
 MIN_GAIN = 0.02          # relative validation improvement an effect must bring
 BOOTSTRAP = 2000
-FAILED_SCORE = 500.0     # % of size scored for an episode whose rollout failed
-
-
-@dataclass(frozen=True)
-class RigidEffect:
-    name: str
-    key: str             # scenario key the value goes to
-    grid: tuple          # values tried
-    unit: str
-    physics: str         # what it means, in words
-    integer: bool = False
-
-
-EFFECTS = (
-    RigidEffect("table_offset", "patch.table_offset",
-                (-5e-3, -4e-3, -3e-3, -2e-3, -1e-3, 0.0, 1e-3, 2e-3, 3e-3, 4e-3),
-                "m", "the table top is not where the model puts it (calibration or geometry)"),
-    RigidEffect("size_offset", "patch.size_offset", (-3e-3, -2e-3, -1e-3, 0.0, 1e-3, 2e-3, 3e-3),
-                "m", "the object's contact geometry is larger or smaller than modelled"),
-    RigidEffect("restitution", "patch.restitution", (0.0, 0.1, 0.2, 0.35, 0.5),
-                "1", "impacts bounce back (the rigid model's impacts are perfectly inelastic)"),
-    RigidEffect("friction_cone", "contact.friction_edges", (4, 6, 8, 12, 16), "edges",
-                "friction is isotropic: the model's polyhedral cone of few edges gives less "
-                "friction to slides between its edges (4 edges: 71 % of mu on the diagonal)",
-                integer=True),
-    RigidEffect("friction", "contact.friction", (0.08, 0.12, 0.18, 0.25, 0.35, 0.5),
-                "1", "the friction coefficient differs from the model's"),
-    RigidEffect("torsional_friction", "patch.torsional_friction", (0.0, 1e-3, 3e-3, 1e-2, 3e-2),
-                "m", "contact patches resist spinning about the table normal (torsional "
-                "friction; the rigid model's point contacts do not)"),
-    RigidEffect("compliance", "contact.eps_c", (1e-4, 1e-3, 1e-2, 3e-2, 1e-1),
-                "1/kg", "contact is compliant (the model's contact regulariser is too stiff)"),
-    RigidEffect("inertia_scale", "patch.inertia_scale", (0.6, 0.8, 1.0, 1.25, 1.5),
-                "1", "the rotational inertia differs from a solid box's"),
-    RigidEffect("r_comp", "patch.r_comp", (-0.1, -0.05, -0.02, 0.0, 0.02, 0.05, 0.1),
-                "m/s", "a constant residual on every complementarity row (the learner's r_comp)"),
-)
-NOT_IDENTIFIABLE = {
-    "mass_scale": "no input acts on the body: scaling its mass and inertia together leaves "
-                  "its motion unchanged (inertia_scale is tried instead)",
-    "rolling_friction": "the rigid model has no rolling resistance term yet (a cube "
-                        "tumbles on its edges rather than rolls); not tried",
-}
-
-
-# ------------------------------------------------------------------ scoring
-def with_values(scenario, values: dict):
-    """A copy of the scenario with `section.field` keys set (key_value's types)."""
-    s = copy.deepcopy(scenario)
-    for key, v in values.items():
-        section, field = key.split(".")
-        setattr(getattr(s, section), field, key_value(key, v))
-    return s
-
-
-def _score_job(job):
-    """Per-episode mean position error (% of size) of one scenario on some episodes."""
-    from adaptive_c3.tools.diagnosis.rigid_model import RigidModelError, RigidObjectModel
-    scenario, episodes, dt, size = job
-    model = RigidObjectModel(scenario, dt)
-    out = []
-    for x in episodes:
-        try:
-            with np.errstate(all="ignore"):
-                x_hat = model.rollout(x[0], len(x) - 1)
-            score = episode_errors(x_hat, x, size)["position_pct_mean"]
-            out.append(score if np.isfinite(score) else FAILED_SCORE)
-        except (RigidModelError, ValueError, np.linalg.LinAlgError):
-            out.append(FAILED_SCORE)
-    return out
-
-
-class Scorer:
-    """Scores lists of scenarios on a fixed episode set, on `workers` processes."""
-
-    def __init__(self, episodes: list, dt: float, size: float, workers: int = 2):
-        self.episodes, self.dt, self.size = episodes, dt, size
-        self.workers = max(1, int(workers))
-        self._pool = None
-        if self.workers > 1:
-            self._pool = multiprocessing.get_context("fork").Pool(self.workers)
-
-    def __call__(self, scenarios: list, progress=None) -> np.ndarray:
-        """[len(scenarios), episodes] scores."""
-        chunks = np.array_split(np.arange(len(self.episodes)), self.workers)
-        jobs = [(s, [self.episodes[i] for i in c], self.dt, self.size)
-                for s in scenarios for c in chunks if len(c)]
-        mapper = self._pool.imap if self._pool else map
-        parts = []
-        for i, part in enumerate(mapper(_score_job, jobs)):
-            parts.append(part)
-            if progress:
-                progress(i + 1, len(jobs))
-        per = len([c for c in chunks if len(c)])
-        return np.array([sum(parts[k * per:(k + 1) * per], []) for k in range(len(scenarios))])
-
-    def close(self):
-        if self._pool:
-            self._pool.terminate()
 
 
 def refine_minimum(grid, means, integer: bool = False) -> float:
@@ -185,12 +97,6 @@ def paired_gain(before: np.ndarray, after: np.ndarray, rng) -> dict:
 
 
 # ------------------------------------------------------------------ the diagnosis
-def _current_value(scenario, key):
-    section, field = key.split(".")
-    v = getattr(getattr(scenario, section), field)
-    return float(v[0]) if isinstance(v, list) and v else (0.0 if isinstance(v, list) else float(v))
-
-
 def split(rec, episodes: dict, held_out_fraction: float, seed: int) -> dict:
     """{fit, validation, held_out: sorted ids} with twins on one side, and the twin pairs."""
     pairs = find_twins(rec)
@@ -204,20 +110,29 @@ def split(rec, episodes: dict, held_out_fraction: float, seed: int) -> dict:
 
 def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episodes: int = 30,
                    workers: int = 2, seed: int = 0, progress: bool | None = None,
-                   baseline: bool = False, show: int = 3, effects=None) -> dict:
+                   baseline: bool = False, show: int = 3, effects=None, model: str = "lcs",
+                   initial_state: str = "ballistic") -> dict:
     """The whole diagnosis of a rigid_object recording; returns a result dict (no files).
-    baseline: also Drake's SAP simulation on the held-out episodes, as it is and with its
-    knobs tuned on the same fit episodes (tools/diagnosis/drake_baseline.py).
-    effects: names from EFFECTS to try (default all)."""
+    model: the backend diagnosed (model_backend.MODELS); its effect library is
+    rigid_effects.library(model). initial_state: how every rollout's start is estimated
+    (initial_state.METHODS), the same for every model compared.
+    baseline (model lcs): also Drake's SAP simulation on the held-out episodes, as it is
+    and with its knobs tuned on the same fit episodes (tools/diagnosis/drake_baseline.py).
+    effects: names from the library to try (default all)."""
+    from adaptive_c3.tools.diagnosis.initial_state import METHODS, initial_states
+    from adaptive_c3.tools.diagnosis.model_backend import make_model
     from adaptive_c3.tools.diagnosis.rigid_locate import locate
-    from adaptive_c3.tools.diagnosis.rigid_model import RigidObjectModel
     from adaptive_c3.tools.user_input import UserError
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
-    library = [e for e in EFFECTS if effects is None or e.name in effects]
-    if effects is not None and len(library) != len(set(effects)):
-        known = ", ".join(e.name for e in EFFECTS)
-        raise UserError(f"unknown effects in {list(effects)} (known: {known})")
+    check_model(model)
+    if initial_state not in METHODS:
+        raise UserError(f"unknown --initial-state '{initial_state}' (known: {', '.join(METHODS)})")
+    full = library(model)
+    chosen_lib = [e for e in full if effects is None or e.name in effects]
+    if effects is not None and len(chosen_lib) != len(set(effects)):
+        known = ", ".join(e.name for e in full)
+        raise UserError(f"unknown effects in {list(effects)} for --model {model} (known: {known})")
     episodes, dt = recording_episodes(rec)
     if len(episodes) < 5:
         raise UserError(f"diagnose needs at least 5 episodes to hold some out, got {len(episodes)}")
@@ -225,15 +140,19 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
     fit_ids = parts["fit"]
     if len(fit_ids) > max_fit_episodes:
         fit_ids = sorted(rng.choice(fit_ids, max_fit_episodes, replace=False).tolist())
-    size = RigidObjectParams.from_scenario(scenario).size
+    params = RigidObjectParams.from_scenario(scenario)
+    size = params.size
     xs = {e: episodes[e][1] for e in episodes}
+    x0s = initial_states(xs, dt, initial_state, params.half_size, params.table_height)
 
-    located = locate(RigidObjectModel(scenario, dt), {e: episodes[e] for e in fit_ids}, dt)
+    located = locate(make_model(model, scenario, dt), {e: episodes[e] for e in fit_ids}, dt)
 
-    fit_score = Scorer([xs[e] for e in fit_ids], dt, size, workers)
-    val_score = Scorer([xs[e] for e in parts["validation"]], dt, size, workers)
-    total = sum(len(e.grid) + 2 for e in library) * MAX_EFFECTS + 2
-    bar = Progress(total, "diagnose: fitting effects", unit="fits", enabled=progress)
+    def scorer(ids):
+        return Scorer([xs[e] for e in ids], dt, size, workers, model, [x0s[e] for e in ids])
+
+    fit_score, val_score = scorer(fit_ids), scorer(parts["validation"])
+    total = sum(len(e.grid) + 2 for e in chosen_lib) * MAX_EFFECTS + 2
+    bar = Progress(total, f"diagnose ({model}): fitting effects", unit="fits", enabled=progress)
     done = [0]
 
     def tick(n=1):
@@ -245,14 +164,15 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
         S0 = fit_score([scenario])[0]
         V0 = val_score([scenario])[0]
         tick(2)
-        rounds, remaining = [], list(library)
+        rounds, remaining = [], list(chosen_lib)
         for _ in range(MAX_EFFECTS):
             if not remaining:
                 break
             base = with_values(scenario, chosen)
             cands = []
             for eff in remaining:
-                grid = sorted(set(eff.grid) | {_current_value(base, eff.key)})
+                here = current_value(base, eff.key)
+                grid = sorted(set(eff.grid) | ({here} if here is not None else set()))
                 S = fit_score([with_values(base, {eff.key: v}) for v in grid])
                 tick(len(grid))
                 means = S.mean(axis=1)
@@ -262,6 +182,7 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
                 if S_best.mean() > means.min():      # the objective is not a parabola there
                     best, S_best = float(grid[int(np.argmin(means))]), S[int(np.argmin(means))]
                 cands.append(dict(name=eff.name, key=eff.key, unit=eff.unit, physics=eff.physics,
+                                  kind=eff.kind, lcs=eff.lcs,
                                   value=best, ci95=list(bootstrap_interval(grid, S, rng, eff.integer)),
                                   grid=list(map(float, grid)), grid_fit_mean=means.tolist(),
                                   fit_mean=float(S_best.mean()),
@@ -284,34 +205,53 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
         val_score.close()
 
     patched = with_values(scenario, chosen)
-    predictors = {"nominal": RigidObjectModel(scenario, dt).rollout,
-                  "diagnosed": RigidObjectModel(patched, dt).rollout}
+    runs = [("nominal", model, scenario), ("diagnosed", model, patched)]
     drake_tuned = None
-    if baseline:
-        from adaptive_c3.tools.diagnosis.drake_baseline import (DrakeRigidSimulator, tune_drake,
-                                                                with_drake)
-        predictors["drake"] = DrakeRigidSimulator(scenario, dt).rollout
+    if baseline and model == "lcs":
+        from adaptive_c3.tools.diagnosis.drake_baseline import tune_drake, with_drake
         drake_tuned, _ = tune_drake(scenario, [xs[e] for e in fit_ids], dt)
-        predictors["drake_tuned"] = DrakeRigidSimulator(with_drake(scenario, **drake_tuned),
-                                                        dt).rollout
+        runs += [("drake", "drake", scenario),
+                 ("drake_tuned", "drake", with_drake(scenario, **drake_tuned))]
+    held, rollouts = held_out_runs(runs, parts["held_out"], episodes, x0s, dt, size, workers,
+                                   show)
+    held_gain = paired_gain(
+        np.array([r["position_pct_mean"] for r in held["nominal"]["per_episode"]]),
+        np.array([r["position_pct_mean"] for r in held["diagnosed"]["per_episode"]]), rng)
+    selected = [dict(r["candidates"][0], validation_gain=r["validation_gain"])
+                for r in rounds if r["accepted"]]
+    return dict(dt=dt, size=size, model=model, initial_state=initial_state, split=parts,
+                fit_episodes=fit_ids, located=located, rounds=rounds, selected=selected,
+                chosen=chosen, patched=patched, not_identifiable=not_identifiable(model),
+                held_out=held, held_out_gain=held_gain, rollouts=rollouts,
+                drake_tuned=drake_tuned, seconds=time.perf_counter() - start)
+
+
+def held_out_runs(runs, ids, episodes: dict, x0s: dict, dt: float, size: float,
+                  workers: int, show: int = 3) -> tuple[dict, dict]:
+    """({tag: {summary, per_episode}}, {episode: {t, data, tag: rollout}} for the first
+    `show` ids) of runs [(tag, model, scenario)] rolled out from the starts x0s."""
     held, rollouts = {}, {}
-    shown = parts["held_out"][:show]
-    for tag, rollout in predictors.items():
+    shown = list(ids)[:show]
+    for tag, model, scen in runs:
+        sc = Scorer([episodes[e][1] for e in ids], dt, size, workers, model,
+                    [x0s[e] for e in ids])
+        try:
+            _, (x_hats,) = sc.run([scen], keep=True)
+        finally:
+            sc.close()
         rows = []
-        for e in parts["held_out"]:
-            x = xs[e]
-            with np.errstate(all="ignore"):
-                x_hat = rollout(x[0], len(x) - 1)
+        for e, x_hat in zip(ids, x_hats):
+            x = episodes[e][1]
+            if x_hat is None:     # a failed rollout scores like the fit's failures
+                rows.append({"episode": e, "position_pct_mean": FAILED_SCORE,
+                             "position_pct_final": FAILED_SCORE, "orientation_deg_mean": 180.0,
+                             "orientation_deg_final": 180.0})
+                continue
             rows.append({"episode": e, **episode_errors(x_hat, x, size)})
             if e in shown:
                 rollouts.setdefault(e, {"t": episodes[e][0], "data": x})[tag] = x_hat
         held[tag] = dict(summary=summarise(rows), per_episode=rows)
-    selected = [dict(r["candidates"][0], validation_gain=r["validation_gain"])
-                for r in rounds if r["accepted"]]
-    return dict(dt=dt, size=size, split=parts, fit_episodes=fit_ids, located=located,
-                rounds=rounds, selected=selected, chosen=chosen, patched=patched,
-                not_identifiable=NOT_IDENTIFIABLE, held_out=held, rollouts=rollouts,
-                drake_tuned=drake_tuned, seconds=time.perf_counter() - start)
+    return held, rollouts
 
 
 def cmd_diagnose_rigid(args, scenario, scenario_text: str, rec) -> int:
@@ -330,7 +270,9 @@ def cmd_diagnose_rigid(args, scenario, scenario_text: str, rec) -> int:
     result = diagnose_rigid(rec, scenario, held_out_fraction=args.held_out,
                             max_fit_episodes=args.fit_episodes, workers=args.workers,
                             baseline=args.baseline == "drake",
-                            effects=tuple(args.effects.split(",")) if args.effects else None)
+                            effects=tuple(args.effects.split(",")) if args.effects else None,
+                            model=check_model(getattr(args, "model", None) or "lcs"),
+                            initial_state=getattr(args, "initial_state", None) or "ballistic")
     report = write_report(out, result, scenario_text, result["rollouts"])
     print(report["summary"])
     print(f"report in {out}: report.json, report.html, patched_scenario.yaml")

@@ -17,36 +17,70 @@ def _sure(gain: dict) -> str:
     return "clearly" if gain["relative_ci95"][0] >= 0.05 else "probably"
 
 
+MODEL_WORDS = {"lcs": "the controller's rigid LCS", "drake": "Drake's SAP simulation"}
+
+
+def _effect_words(s: dict) -> str:
+    g = s["validation_gain"]
+    return (f"{s['physics']} ({s['name']} = {s['value']:.4g} {s['unit']}, 95 % "
+            f"interval [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]; {_sure(g)}: validation "
+            f"error down {100 * g['relative']:.0f} %, 95 % interval of the gain "
+            f"[{g['ci95'][0]:.2f}, {g['ci95'][1]:.2f}] % of size)")
+
+
+def lcs_meaning(selected: list) -> list[str]:
+    """For a drake diagnosis: what each selected effect means for the controller's LCS."""
+    out = []
+    for s in selected:
+        if s.get("lcs", "").startswith(("contact.", "patch.")):
+            out.append(f"{s['name']}: LCS patch {s['lcs']} = {s['value']:.4g}")
+        else:
+            out.append(f"{s['name']}: {s.get('lcs') or 'no LCS counterpart'}")
+    return out
+
+
 def plain_summary(result: dict) -> str:
     held = result["held_out"]
+    model = result.get("model", "lcs")
+    words = MODEL_WORDS.get(model, model)
     before = held["nominal"]["summary"]["position_pct_mean_median"]
     after = held["diagnosed"]["summary"]["position_pct_mean_median"]
     n = held["nominal"]["summary"]["episodes"]
+    head = f"Model diagnosed: {model} ({words}); starts: {result.get('initial_state', 'first-row')}. "
     if not result["selected"]:
         first = result["rounds"][0]["candidates"][0] if result["rounds"] else None
         tail = (f" The best single candidate ({first['name']}) did not improve the validation "
                 "episodes enough to be kept." if first else "")
-        return (f"No effect in the library explains the mismatch better than the plain model "
-                f"on episodes it was not fitted on.{tail} Held-out median position error "
+        return (head + f"No effect in the library explains the mismatch better than the plain "
+                f"model on episodes it was not fitted on.{tail} Held-out median position error "
                 f"{before:.1f} % of the object's size ({n} episodes).")
-    parts = []
-    for s in result["selected"]:
-        g = s["validation_gain"]
-        parts.append(f"{s['physics']} ({s['name']} = {s['value']:.4g} {s['unit']}, 95 % "
-                     f"interval [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]; {_sure(g)}: validation "
-                     f"error down {100 * g['relative']:.0f} %, 95 % interval of the gain "
-                     f"[{g['ci95'][0]:.2f}, {g['ci95'][1]:.2f}] % of size)")
-    return ("The rigid model leaves out: " + "; then ".join(parts) + f". On {n} held-out "
-            f"episodes the median mean-over-time position error goes {before:.1f} % -> "
-            f"{after:.1f} % of the object's size.")
+    physics = [s for s in result["selected"] if s.get("kind", "physics") == "physics"]
+    nuisance = [s for s in result["selected"] if s.get("kind") == "nuisance"]
+    text = head
+    if physics:
+        text += f"{words[0].upper() + words[1:]} leaves out: " + "; then ".join(
+            _effect_words(s) for s in physics) + ". "
+    if nuisance:
+        text += "Nuisances fitted (not missing physics): " + "; ".join(
+            _effect_words(s) for s in nuisance) + ". "
+    g = result.get("held_out_gain")
+    gain = (f" (paired per-episode drop {g['drop']:.2f}, 95 % interval [{g['ci95'][0]:.2f}, "
+            f"{g['ci95'][1]:.2f}] % of size)" if g else "")
+    text += (f"On {n} held-out episodes the median mean-over-time position error goes "
+             f"{before:.1f} % -> {after:.1f} % of the object's size{gain}.")
+    if model == "drake":
+        text += " For the controller's LCS: " + "; ".join(lcs_meaning(result["selected"])) + "."
+    return text
 
 
 def patched_scenario_text(scenario_text: str, chosen: dict) -> str:
     data = yaml.safe_load(scenario_text) or {}
-    from adaptive_c3.tools.diagnosis.rigid_model import key_value
+    from adaptive_c3.tools.diagnosis.rigid_effects import set_key
+    from adaptive_c3.scenarios.rigid_object_schema import DrakeBaseline
     for key, value in chosen.items():
-        section, field = key.split(".")
-        data.setdefault(section, {})[field] = key_value(key, value)
+        if key.startswith("drake.external_force[") and "external_force" not in data.get("drake", {}):
+            data.setdefault("drake", {})["external_force"] = list(DrakeBaseline().external_force)
+        set_key(data, key, value, as_dict=True)
     notes = ", ".join(f"{k} = {v:.4g}" for k, v in chosen.items()) or "no effect selected"
     return ("# written by adaptive-c3 diagnose: " + notes + "\n"
             + yaml.safe_dump(data, sort_keys=False))
@@ -55,7 +89,8 @@ def patched_scenario_text(scenario_text: str, chosen: dict) -> str:
 def report_dict(result: dict) -> dict:
     split = result["split"]
     return dict(
-        task="rigid_object", dt=result["dt"], object_size_m=result["size"],
+        task="rigid_object", model=result.get("model", "lcs"),
+        initial_state=result.get("initial_state"), dt=result["dt"], object_size_m=result["size"],
         split=dict(fit=split["fit"], validation=split["validation"], held_out=split["held_out"],
                    fit_episodes_used=result["fit_episodes"],
                    twins=[list(p) for p in split["twins"]],
@@ -66,8 +101,11 @@ def report_dict(result: dict) -> dict:
                      candidates=[{k: c[k] for k in ("name", "key", "value", "ci95", "unit",
                                                     "fit_mean", "fit_gain_relative", "physics")}
                                  for c in r["candidates"]]) for r in result["rounds"]],
-        selected=[{k: s[k] for k in ("name", "key", "value", "ci95", "unit", "physics",
-                                     "validation_gain")} for s in result["selected"]],
+        selected=[{k: s.get(k) for k in ("name", "key", "value", "ci95", "unit", "physics",
+                                         "kind", "lcs", "validation_gain")}
+                  for s in result["selected"]],
+        lcs_meaning=(lcs_meaning(result["selected"]) if result.get("model") == "drake" else None),
+        held_out_gain=result.get("held_out_gain"),
         not_identifiable=[dict(name=k, reason=v) for k, v in result["not_identifiable"].items()],
         held_out={k: v["summary"] for k, v in result["held_out"].items()},
         held_out_per_episode={k: v["per_episode"] for k, v in result["held_out"].items()},
@@ -163,10 +201,10 @@ def write_report(out: Path, result: dict, scenario_text: str, rollouts: dict) ->
     imgs = embedded_figures(files)
     s = report["split"]
     (out / "report.html").write_text(f"""<!doctype html><html><head><meta charset="utf-8">
-<title>adaptive-c3 diagnose: rigid object</title>
+<title>adaptive-c3 diagnose: rigid object ({esc(report['model'])})</title>
 <style>body{{font-family:sans-serif;max-width:1100px;margin:auto}}
 td,th{{border:1px solid #ccc;padding:2px 6px;font-size:12px}} table{{border-collapse:collapse}}</style>
-</head><body><h1>Model / recording mismatch: rigid object</h1>
+</head><body><h1>Model / recording mismatch: rigid object, model {esc(report['model'])}</h1>
 <p><b>{esc(report['summary'])}</b></p>
 <p>Episodes: {len(s['fit'])} fit ({len(s['fit_episodes_used'])} used), {len(s['validation'])}
 validation, {len(s['held_out'])} held out; {len(s['twins'])} twin pairs kept together.</p>
