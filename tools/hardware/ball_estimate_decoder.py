@@ -14,11 +14,13 @@ class BallEstimateDecoder(LeafSystem):
     Every `period` s it takes the subscriber's newest message if it fits the layout
     (finite, 6 named values) and holds it; before the first valid message it outputs
     `prior` (the scenario's start position, at rest). Messages of another layout are
-    counted and ignored. (The controller's LCS refuses non-finite states, so the
+    counted and ignored; messages that did not decode at all are counted in `health`
+    (the channel's ChannelHealth, or None). (The controller's LCS refuses non-finite states, so the
     decoder never outputs NaN.)"""
 
-    def __init__(self, prior, period: float = 1e-3):
+    def __init__(self, prior, period: float = 1e-3, health=None):
         super().__init__()
+        self.health = health
         from drake import lcmt_robot_state
         self._in = self.DeclareAbstractInputPort("lcmt_robot_state",
                                                  AbstractValue.Make(lcmt_robot_state()))

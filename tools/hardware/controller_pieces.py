@@ -22,6 +22,7 @@ from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, COMMAND_CHANN
 class StatusInput:
     status: object          # output port: the newest lcmt_panda_status (Python message)
     arm_state: object       # output port: (14) q, v, with q_null / 0 for non-finite values
+    health: object = None   # ChannelHealth of PANDA_STATUS (sampled input only)
 
 
 def add_lcm(builder, lcm):
@@ -33,7 +34,8 @@ def add_lcm(builder, lcm):
 def add_status_input(builder, lcm, s, sample_period: float | None = None) -> StatusInput:
     """PANDA_STATUS decoded once (Python), and as the arm state. sample_period: take the
     newest status every sample_period s (SampledLcmSubscriber) instead of at every
-    message - for a diagram that does not need the driver's 1 kHz."""
+    message - for a diagram that does not need the driver's 1 kHz; such an input also
+    survives undecodable messages (counted in StatusInput.health)."""
     from drake import lcmt_panda_status
     from pydrake.systems.lcm import LcmSubscriberSystem
 
@@ -47,18 +49,21 @@ def add_status_input(builder, lcm, s, sample_period: float | None = None) -> Sta
     arm = builder.AddSystem(StatusArmState(np.r_[np.asarray(s.impedance.q_null, float),
                                                  np.zeros(NQ)]))
     builder.Connect(sub.get_output_port(), arm.get_input_port())
-    return StatusInput(sub.get_output_port(), arm.get_output_port())
+    return StatusInput(sub.get_output_port(), arm.get_output_port(),
+                       getattr(sub, "health", None))
 
 
 def add_ball_input(builder, lcm, s, period: float):
+    """BALL_ESTIMATE sampled every `period` s; an undecodable message is counted (the
+    decoder's counts) and never used."""
     from drake import lcmt_robot_state
-    from pydrake.systems.lcm import LcmSubscriberSystem
 
     from adaptive_c3.diagrams.ball_rolling import ball_start_xy
     from adaptive_c3.tools.hardware.ball_estimate_decoder import BallEstimateDecoder
-    sub = builder.AddSystem(LcmSubscriberSystem.Make(BALL_CHANNEL, lcmt_robot_state, lcm))
+    from adaptive_c3.tools.hardware.sampled_subscriber import SampledLcmSubscriber
+    sub = builder.AddSystem(SampledLcmSubscriber(BALL_CHANNEL, lcmt_robot_state, lcm, period))
     ball = builder.AddSystem(BallEstimateDecoder(np.r_[ball_start_xy(s), s.model.ball_radius],
-                                                 period=period))
+                                                 period=period, health=sub.health))
     builder.Connect(sub.get_output_port(), ball.get_input_port())
     return ball
 

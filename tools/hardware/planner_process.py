@@ -23,20 +23,32 @@ from pydrake.systems.framework import DiagramBuilder
 class PlannerProcess:
     diagram: object
     controller: object       # BallRollingController
-    ball: object             # BallEstimateDecoder
+    ball: object             # BallEstimateDecoder (its .health: BALL_ESTIMATE's ChannelHealth)
     gait: object             # the planner's Gait (its phase schedule, diagram time)
+    status_health: object = None   # PANDA_STATUS's ChannelHealth
 
-    def summary(self, context) -> dict:
-        """C3 solve times (ms), learner steps and rate, and the gait's roll-phase starts
-        (diagram time, s) up to the context's time."""
-        c = self.controller
-        solve_ms = np.asarray(c.planner.solve_times, float) * 1e3
-        t = float(context.get_time())
-        steps = c.learner.num_steps(c.learner.GetMyContextFromRoot(context))
+    def roll_starts(self, t: float) -> list:
+        """The gait's roll-phase starts (diagram time, s) up to diagram time t."""
         g = self.gait
         starts = []
         while g.t0 + g.s.settle_s + len(starts) * g.period <= t:
             starts.append(g.t0 + g.s.settle_s + len(starts) * g.period)
+        return starts
+
+    def learner_steps(self, context) -> int:
+        c = self.controller
+        return int(c.learner.num_steps(c.learner.GetMyContextFromRoot(context)))
+
+    def summary(self, context, planned_s: float | None = None, learner_steps: int | None = None,
+                roll_starts=None) -> dict:
+        """C3 solve times (ms), learner steps and rate, and the gait's roll-phase starts
+        (diagram time, s) up to the context's time. planned_s, learner_steps, roll_starts:
+        the totals over several planning segments (planner_run.py), if there were."""
+        c = self.controller
+        solve_ms = np.asarray(c.planner.solve_times, float) * 1e3
+        t = float(context.get_time()) if planned_s is None else planned_s
+        steps = self.learner_steps(context) if learner_steps is None else learner_steps
+        starts = self.roll_starts(t) if roll_starts is None else roll_starts
         return {"c3_solves": int(solve_ms.size),
                 "c3_solve_ms": {"p50": float(np.median(solve_ms)) if solve_ms.size else None,
                                 "p99": (float(np.percentile(solve_ms, 99))
@@ -80,4 +92,5 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
     builder.Connect(enc.get_output_port(), pub.get_input_port())
     diagram = builder.Build()
     diagram.set_name(f"planner[{s.name}]")
-    return PlannerProcess(diagram, c, ball, make_gait(s))   # the schedule the planner's gait keeps
+    # (make_gait: the schedule the planner's gait keeps)
+    return PlannerProcess(diagram, c, ball, make_gait(s), status.health)

@@ -28,26 +28,42 @@ def cmd_impedance(args) -> int:
 
 
 def cmd_planner(args) -> int:
-    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario, run_realtime
-    from adaptive_c3.tools.hardware.lcm_channels import BALL_CHANNEL, STATUS_CHANNEL, open_lcm
+    """The planner process (planner_run.py): stops planning on a stale status and waits
+    for the robot again; a run of undecodable messages is a safe stop (exit code 3)."""
+    import signal
+
+    from adaptive_c3.tools.hardware.lcm_channels import open_lcm
     from adaptive_c3.tools.hardware.planner_process import build_planner_process
-    s, _, duration = load_hardware_scenario(args)
+    from adaptive_c3.tools.hardware.planner_run import PlannerRun
+    from adaptive_c3.tools.hardware.realtime import load_hardware_scenario
+    from adaptive_c3.tools.hardware.realtime_priority import request_nice
+    from adaptive_c3.tools.process_tuning import freeze_heap
     from adaptive_c3.tools.user_input import UserError
+    s, _, duration = load_hardware_scenario(args)
     if not (0 <= args.delay_ms < 1000):
         raise UserError(f"--delay-ms must be in [0, 1000), got {args.delay_ms}")
-    from adaptive_c3.tools.hardware.realtime_priority import request_nice
     lcm = open_lcm(args.lcm_url)
     scheduling = request_nice(args.nice)
     proc = build_planner_process(s, lcm, delay_s=args.delay_ms * 1e-3)
-    start_epoch_s = []      # wall clock at diagram time 0 (to line up with the driver's)
-    ctx, wall = run_realtime(proc.diagram, duration,
-                             f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}",
-                             wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]), wait_s=args.wait_s,
-                             on_start=lambda: start_epoch_s.append(time.time()))
-    out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall, "cpu_s": time.process_time(),
-           "start_epoch_s": start_epoch_s[0], "scheduling": scheduling, **proc.summary(ctx)}
+    run = PlannerRun(proc, lcm, stale_s=getattr(args, "stale_ms", 100.0) * 1e-3,
+                     malformed_run=s.safety.malformed_run)
+    start_epoch_s = []      # wall clock at each planning start (to line up with the driver's)
+    run.on_start = lambda: (start_epoch_s.append(time.time()), freeze_heap())
+
+    def on_term(_signum, _frame):
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGTERM, on_term)
+    print("waiting for PANDA_STATUS, BALL_ESTIMATE ...", flush=True)
+    print(f"planner: PANDA_STATUS + BALL_ESTIMATE -> EE_PLAN on {args.lcm_url}"
+          + (f" for {duration:g} s" if duration else "; Ctrl-C to stop"), flush=True)
+    wall = time.perf_counter()
+    run.run(duration, wait_s=args.wait_s)
+    out = {"wall_s": time.perf_counter() - wall, "cpu_s": time.process_time(),
+           "start_epoch_s": start_epoch_s[0] if start_epoch_s else None,
+           "scheduling": scheduling, **run.summary()}
+    out["sim_time_s"] = out["planned_s"]
     print(json.dumps(out, default=float), flush=True)
-    return 0
+    return run.exit_code()
 
 
 def run_split(args) -> int:

@@ -21,6 +21,8 @@ robot). It publishes and subscribes only the robot's / vision's LCM messages:
                  held by gravity compensation + joint damping; a command in another
                  control mode or with wrong field counts stops the driver; torques are
                  low-passed at --low-pass-hz (30 Hz) and rate limited (1000 N m/s).
+                 The newest command is taken at every 1 ms tick; a message that does
+                 not decode is counted (summary: commands_undecodable), never used.
 
 The simulator runs in real time by default (a robot process); `build_sim_driver` is
 also used in lock-step by tools/hardware/bridge.py's loopback run (one process, memq://).
@@ -70,6 +72,7 @@ class SimDriver:
     diagram: object
     plant: object
     command: object         # FrankaTorqueDriver
+    command_health: object  # PANDA_COMMAND's ChannelHealth (undecodable commands)
     logs: dict              # name -> VectorLogSink: ball_true (13), panda_state (14), tau (7)
     true_radius: float      # m, the true ball
     ball_start: np.ndarray
@@ -84,15 +87,16 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     clock: t -> microseconds since the epoch (tools/hardware/driver_clock.py); default
     a SimEpochClock (lock-step runs); a real-time driver passes wall_clock_us."""
     from drake import lcmt_panda_command, lcmt_robot_state
-    from pydrake.systems.lcm import (LcmInterfaceSystem, LcmPublisherSystem,
-                                     LcmSubscriberSystem)
+    from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem
 
     from adaptive_c3.diagrams.ball_rolling import (_set_panda_start, ball_start_xy,
                                                    make_gait, true_radius)
     from adaptive_c3.models.ball_rolling_controller_model import default_state
     from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene
     from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
+    from adaptive_c3.systems.franka.franka_driver_rules import TICK_S
     from adaptive_c3.systems.franka.franka_torque_driver import FrankaTorqueDriver
+    from adaptive_c3.tools.hardware.sampled_subscriber import SampledLcmSubscriber
     from adaptive_c3.systems.franka.panda_sim_driver import GravityCompensatedDriver
     from adaptive_c3.tools.hardware.driver_clock import SimEpochClock
     from adaptive_c3.tools.hardware.status_sender import StatusSender
@@ -120,9 +124,12 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     _set_panda_start(plant, scene.panda, ee_start, s)
 
     builder.AddSystem(LcmInterfaceSystem(lcm))
-    sub = builder.AddSystem(LcmSubscriberSystem.Make(COMMAND_CHANNEL, lcmt_panda_command, lcm))
+    # the newest command at each 1 kHz tick, as libfranka's control callback takes it; a
+    # message that does not decode is counted (sub.health) and never used
+    sub = builder.AddSystem(SampledLcmSubscriber(COMMAND_CHANNEL, lcmt_panda_command, lcm,
+                                                 TICK_S))
     clock = clock if clock is not None else SimEpochClock()
-    cmd = builder.AddSystem(FrankaTorqueDriver(clock, expire_sec, low_pass_hz))
+    cmd = builder.AddSystem(FrankaTorqueDriver(clock, expire_sec, low_pass_hz, TICK_S))
     builder.Connect(sub.get_output_port(), cmd.GetInputPort("lcmt_panda_command"))
     driver = builder.AddSystem(GravityCompensatedDriver())
     state = plant.get_state_output_port(scene.panda)
@@ -161,7 +168,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
         logs[name] = sink
     diagram = builder.Build()
     diagram.set_name(f"sim_driver[{s.name}]")
-    return SimDriver(diagram, plant, cmd, logs, R_true, np.r_[start_xy, R_true], m.ee_radius,
+    return SimDriver(diagram, plant, cmd, sub.health, logs, R_true, np.r_[start_xy, R_true], m.ee_radius,
                      (tuple(s.target.center), s.target.radius))
 
 
@@ -189,7 +196,8 @@ def driver_summary(drv: SimDriver, context) -> dict:
             "min_ee_ball_distance_m": float(min(gaps)) if gaps else None,
             "first_contact_s": None if first is None else float(ball.sample_times()[5 * first]),
             "circle_turns": max(circle_progress(b[:, 4:6], *drv.target), 0.0),
-            **drv.command.counts(dctx)}
+            **drv.command.counts(dctx),
+            "commands_undecodable": drv.command_health.undecodable}
 
 
 def cmd_sim_driver(args) -> int:
