@@ -1,12 +1,20 @@
 """ImpedanceTick: one step of the 1 kHz impedance loop, without a Drake diagram.
 
-  PANDA_STATUS -> arm state (q_null at rest for a status whose values are not all
-  finite: the watchdog below latches the stop on it) -> the scenario's impedance law
-  tracking the held EE plan (PlanHold) -> zero unless the plan may be used and
-  robot_mode is kMove or kIdle (guiding, reflex, user stop, error recovery, other: a
-  human or the robot's own safety has the arm) -> WatchdogCore (stale status, malformed,
-  torque and rate limits, latched stop on non-finite) -> PANDA_COMMAND in torque mode,
-  stamped with the latest status utime.
+  receive_status / receive_plan / receive_ball: each message as it arrives (None = it
+  did not decode); a malformed one is counted and never used (SafetyMonitor.message)
+  step(t): newest PANDA_STATUS -> arm state -> the scenario's impedance law tracking the
+  held EE plan (PlanHold) -> zero unless robot_mode is kMove or kIdle (guiding, reflex,
+  user stop, error recovery, other: a human or the robot's own safety has the arm) ->
+  SafetyMonitor (the scenario's `safety:` limits) -> WatchdogCore (torque and rate
+  limits) -> PANDA_COMMAND in torque mode, stamped with the latest status utime.
+
+Modes (SafetyMonitor): WAITING sends nothing until there is a status and a plan at most
+plan_hold_s older than it (the driver holds the arm meanwhile). ACTIVE commands the law.
+A breach (or a requested stop) -> STOPPING: damping -kd v on each new status for
+safety.stop_ramp_s, then STOPPED: nothing more is ever sent, `finished` is True and the
+process ends (exit code SAFE_STOP_EXIT after a breach). There is no resuming: a status
+gap is a breach, so after a driver restart the impedance process must be started again,
+and it then waits for a fresh status and a plan made from one.
 
 The stamp is the latest status utime, not our wall clock: the status utime IS the
 driver's clock, so no clock synchronisation between two PCs is needed, and a command
@@ -20,45 +28,132 @@ little else: ~0.1 ms, against ~0.5 ms as a Simulator tick (README, Hardware over
 """
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from adaptive_c3.systems.franka.panda_watchdog import (StatusSample, WatchdogConfig,
                                                        WatchdogCore)
+from adaptive_c3.systems.franka.safety_monitor import SafetyMonitor
+from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, PLAN_CHANNEL,
+                                                     STATUS_CHANNEL, decode_ball_estimate)
 from adaptive_c3.tools.hardware.plan_hold import PlanHold
-from adaptive_c3.tools.hardware.status_arm_state import arm_state_from_status
 from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
 
 NQ = 7
-_ZERO = np.zeros(NQ)
+
+
+def usable_status(msg) -> bool:
+    """A status with 7 joints and finite q, v (anything else is malformed)."""
+    try:
+        if msg.num_joints != NQ or msg.utime <= 0:
+            return False
+        x = np.asarray([*msg.joint_position, *msg.joint_velocity], float)
+    except (TypeError, ValueError, AttributeError):
+        return False
+    return x.shape == (2 * NQ,) and math.isfinite(x @ x)
 
 
 class ImpedanceTick:
     def __init__(self, s, *, stale_s: float = 0.05, rate_limit: float = 1000.0,
-                 plan_hold_s: float = 0.1, plan_timeout_s: float = 0.5):
+                 plan_hold_s: float = 0.1, say=None):
         from drake import lcmt_panda_status
 
         from adaptive_c3.diagrams.ball_rolling import make_impedance_law
         self.law = make_impedance_law(s)
-        self.plan = PlanHold(plan_hold_s, plan_timeout_s)
+        lim = s.safety
+        self.plan = PlanHold(min(plan_hold_s, lim.plan_max_age_s), lim.plan_max_age_s)
+        self._ready_us = 1e6 * min(plan_hold_s, lim.plan_max_age_s)
         self.watchdog = WatchdogCore(WatchdogConfig(stale_s=stale_s, rate_limit=rate_limit))
         self.watchdog_state = self.watchdog.new_state()
-        self._fallback = np.r_[self.law.q_null, np.zeros(NQ)]
+        self.safety = SafetyMonitor(lim, **({} if say is None else {"say": say}))
         self._modes = (lcmt_panda_status.kMove, lcmt_panda_status.kIdle)
+        self.status = None                  # the newest usable PANDA_STATUS
+        self._new = self._plans_seen = 0    # statuses since the last tick; plans taken
+        self._gap_us = 0.0                  # largest utime step among them
+        self._ball = False
 
-    def step(self, t: float, status):
-        """The command for the newest status (None before the first one: nothing is sent,
-        since a command needs the driver's clock) at the loop's time t (s)."""
-        sample = StatusSample.from_lcm(status)
-        if sample is None:
-            self.watchdog.step(self.watchdog_state, t, None, _ZERO)
+    # ------------------------------------------------------------ arrivals
+    def receive_status(self, msg) -> None:
+        ok = msg is not None and usable_status(msg)
+        self.safety.message(STATUS_CHANNEL, ok)
+        if not ok or (self.status is not None and msg.utime <= self.status.utime):
+            return                          # bad, a repeat or out of order: not used
+        if self.status is not None:
+            self._gap_us = max(self._gap_us, float(msg.utime - self.status.utime))
+        self.status = msg
+        self._new += 1
+
+    def receive_plan(self, msg) -> None:
+        taken = None if msg is None else self.plan.take(msg)
+        if msg is not None and taken is None:
+            return                          # a repeat of the held plan
+        self.safety.message(PLAN_CHANNEL, bool(taken))
+
+    def receive_ball(self, msg) -> None:
+        ok = msg is not None and bool(np.isfinite(decode_ball_estimate(msg)).all())
+        self.safety.message(BALL_CHANNEL, ok)
+        self._ball |= ok
+
+    @property
+    def finished(self) -> bool:
+        """True once the stop is over: nothing will be sent again."""
+        return self.safety.mode == "stopped"
+
+    def request_stop(self, t: float, reason: str) -> None:
+        """An orderly end (run over, SIGINT/SIGTERM): the same damping, no breach."""
+        self.safety.stop(t, reason, "requested", breach=False)
+
+    # ------------------------------------------------------------ the tick
+    def step(self, t: float, status=None):
+        """The command for the newest status at the loop's time t (s), or None (nothing
+        to send). `status`: a message that arrived just now (as receive_status)."""
+        if status is not None:
+            self.receive_status(status)
+        mon, st = self.safety, self.status
+        new, gap, plans, ball = self._new, self._gap_us, self.plan.used - self._plans_seen, self._ball
+        self._new, self._plans_seen = 0, self.plan.used
+        self._gap_us, self._ball = 0.0, False
+        mon.tick(t)
+        mon.statuses(t, new, gap)           # (all three: only counted while active)
+        mon.plans(plans)
+        if ball:
+            mon.ball(t)
+        if mon.mode == "waiting" and st is not None and self.plan.age_us(st.utime) <= self._ready_us:
+            mon.start(t)
+        age_s = math.inf if st is None else 1e-6 * self.plan.age_us(st.utime)
+        mon.check_timing(t, age_s)
+        if mon.mode == "active":
+            cmd = self._control(t, st)
+            if cmd is not None:
+                return cmd
+        tau = mon.stop_torque(t, st.joint_velocity) if (new and st is not None) else None
+        if tau is None:
+            mon.stop_torque(t, None)        # (ends the ramp on time without a status)
             return None
-        tau = _ZERO
-        desired, feedforward, ok = self.plan.target(sample.utime)
-        if ok and status.robot_mode in self._modes:
-            tau = self.law.torque(arm_state_from_status(status, self._fallback), desired,
-                                  feedforward)
-        tau = self.watchdog.step(self.watchdog_state, t, sample, tau)
-        return torque_command_message(tau, sample.utime)
+        return torque_command_message(tau, st.utime)
+
+    def _control(self, t, st):
+        x = np.r_[st.joint_position, st.joint_velocity]
+        desired, feedforward, _ = self.plan.target(st.utime)
+        arm = self.law.arm
+        if st.robot_mode in self._modes:
+            tau = self.law.torque(x, desired, feedforward)     # (leaves arm at x)
+            p = arm.tip_pose()[0]
+            tip = np.r_[p, (arm.tip_jacobian() @ x[NQ:])[3:]]
+        else:
+            tau = np.zeros(NQ)
+            tip = self.law.tip_state(x)
+        self.safety.check_state(t, x[:NQ], x[NQ:], tip, tau, self.law.gains.torque_limits)
+        if self.safety.mode != "active":
+            return None
+        tau = self.watchdog.step(self.watchdog_state, t, StatusSample.from_lcm(st), tau)
+        if self.watchdog_state.mode != "ok":
+            self.safety.stop(t, "watchdog", self.watchdog_state.first_fault or
+                             self.watchdog_state.mode)
+            return None
+        return torque_command_message(tau, st.utime)
 
     def report(self) -> dict:
-        return {"watchdog": self.watchdog_state.report(), **self.plan.counts()}
+        return {"watchdog": self.watchdog_state.report(), **self.plan.counts(),
+                "safety": self.safety.report()}

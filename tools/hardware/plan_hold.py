@@ -30,16 +30,18 @@ class PlanHold:
         self._utime = None
         self.used = self.ignored = 0
 
-    def take(self, msg) -> None:
-        """A new EE_PLAN message (a repeat of the held plan's utime is not counted)."""
+    def take(self, msg) -> bool | None:
+        """A new EE_PLAN message: True = taken, False = it does not fit the layout
+        (counted as ignored), None = a repeat of the held plan's utime (not counted)."""
         if self._utime is not None and int(msg.utime) == self._utime:
-            return
+            return None
         v = decode_plan(msg)
         if v is None:
             self.ignored += 1
-            return
+            return False
         self._plan, self._utime = v, int(msg.utime)
         self.used += 1
+        return True
 
     def age_us(self, status_utime: int) -> float:
         return math.inf if self._utime is None else float(status_utime - self._utime)

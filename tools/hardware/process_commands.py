@@ -24,7 +24,7 @@ def cmd_impedance(args) -> int:
     out = proc.run(duration, tick_s=args.period, wait_s=args.wait_s)
     out.update(cpu_s=time.process_time(), scheduling=scheduling)
     print(json.dumps(out, default=float), flush=True)
-    return 0
+    return out["safety"]["exit_code"]      # 3 after a safe stop (SAFE_STOP_EXIT)
 
 
 def cmd_planner(args) -> int:
