@@ -156,7 +156,7 @@ def test_sim_driver_counts_garbage_commands_and_keeps_obeying():
     out = driver_summary(drv, sim.get_context())
     assert out["commands_undecodable"] == 7
     assert out["commands_received"] >= 280 and out["commands_expired"] == 0
-    tau = drv.command.get_output_port().Eval(drv.command.GetMyContextFromRoot(sim.get_context()))
+    tau = drv.command.GetOutputPort("panda.torque_command").Eval(drv.command.GetMyContextFromRoot(sim.get_context()))
     assert np.allclose(tau, 0.5, atol=0.05)           # the good commands are obeyed
 
 
@@ -184,8 +184,67 @@ def test_sim_driver_holds_a_killed_controller_and_obeys_a_restarted_one():
             utime = lcmt_panda_status.decode(status[-1]).utime
             lcm.Publish("PANDA_COMMAND", torque_command_message(np.full(7, 0.5), utime).encode())
         sim.AdvanceTo(k * 1e-3)
-        taus[k] = np.asarray(drv.command.get_output_port().Eval(ctx))
+        taus[k] = np.asarray(drv.command.GetOutputPort("panda.torque_command").Eval(ctx))
     out = driver_summary(drv, sim.get_context())
     assert np.allclose(taus[200], 0.5, atol=0.05) and np.allclose(taus[600], 0.5, atol=0.05)
     assert np.abs(taus[390] - 0.5).max() > 0.4        # held by the driver's damping
     assert out["commands_expired"] == 1 and out["ticks_without_command"] > 80
+
+
+def test_unsafe_tally_conditions():
+    from adaptive_c3.models.panda_kinematics import Q_MAX, Q_NULL, TAU_MAX
+    from adaptive_c3.systems.franka.arm_unsafe_tally import UnsafeTally
+    tally = UnsafeTally(0.03)
+    ball = [0.55, 0.0, 0.03]
+    s = tally.initial_state()
+    for _ in range(20):                                  # 40 ms at the limit: not yet
+        s = tally.step(s, 2e-3, Q_NULL, TAU_MAX, ball, 0)
+    assert tally.report(s)["unsafe_s"] == 0.0
+    for _ in range(10):                                  # 60 ms: 10 ms of it unsafe
+        s = tally.step(s, 2e-3, Q_NULL, TAU_MAX, ball, 0)
+    assert tally.report(s)["unsafe_s"] == pytest.approx(0.01)
+    s = tally.initial_state()
+    near = Q_NULL.copy()
+    near[3] = Q_MAX[3] - np.radians(1.5)
+    s = tally.step(s, 2e-3, near, np.zeros(7), ball, 0)
+    s = tally.step(s, 2e-3, Q_NULL, np.zeros(7), [0.55, 0.0, -0.5], 0)
+    s = tally.step(s, 2e-3, Q_NULL, np.zeros(7), [2.0, 0.0, 0.03], 1)   # held by the driver
+    r = tally.report(s)
+    assert r["unsafe_s"] == pytest.approx(0.004) and r["unsafe_total_s"] == pytest.approx(0.006)
+    assert r["unsafe_by_reason_s"] == pytest.approx(
+        {"torque_at_limit": 0.0, "joint_near_limit": 0.002, "ball_off_table": 0.004})
+
+
+def test_sim_driver_measures_unsafe_time_of_a_saturating_controller():
+    """A controller that pins joint 1 at +87 N m: the driver's summary says how long the
+    arm was unsafe under its commands, and when (episodes in the driver's clock)."""
+    from drake import lcmt_panda_status
+    from pydrake.lcm import DrakeLcm
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.sim_driver import (build_sim_driver, driver_summary,
+                                                       unsafe_before)
+    from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
+    s = _scenario()
+    lcm = DrakeLcm("memq://")
+    drv = build_sim_driver(s, lcm, low_pass_hz=1000.0)
+    status = []
+    lcm.Subscribe("PANDA_STATUS", lambda d: status.append(d))
+    sim = Simulator(drv.diagram)
+    sim.Initialize()
+    tau = np.zeros(7)
+    tau[0] = 87.0
+    for k in range(1, 401):
+        lcm.HandleSubscriptions(0)
+        utime = lcmt_panda_status.decode(status[-1]).utime
+        if k <= 300:                           # then the controller stops: the driver holds
+            lcm.Publish("PANDA_COMMAND", torque_command_message(tau, utime).encode())
+        sim.AdvanceTo(k * 1e-3)
+    out = driver_summary(drv, sim.get_context())
+    # the torque reaches its limit after ~90 ms (1000 N m/s), unsafe 50 ms later, until
+    # the last command expires at 0.4 s (then the driver's own damping: not counted)
+    assert 0.2 < out["unsafe_s"] < 0.3 and out["unsafe_by_reason_s"]["torque_at_limit"] > 0.2
+    episodes = out["unsafe_episodes"]
+    assert episodes and "torque_at_limit" in episodes[0][3]
+    assert unsafe_before(episodes, None) == pytest.approx(out["unsafe_s"], abs=0.011)
+    assert unsafe_before(episodes, episodes[0][0]) == 0.0

@@ -5,6 +5,8 @@ input  "lcmt_panda_command"    abstract: the latest drake.lcmt_panda_command
 input  "panda.state"           (14) q (rad), v (rad/s)
 output "panda.torque_command"  (7) N m, WITHOUT gravity: what the robot applies on top of
                                its own gravity compensation (after expiry: joint damping)
+output "driver.ticks_held"     (1) ticks so far in which the driver held the arm itself
+                               (no command, or it expired)
 Every `period` (1 ms) it ticks the rules with now = clock(t) (microseconds since the
 epoch: the wall clock in a real-time process, a fixed epoch + simulation time in a
 lock-step one). A command the real driver would throw on raises DriverContractError
@@ -34,6 +36,10 @@ class FrankaTorqueDriver(LeafSystem):
         self.DeclarePeriodicDiscreteUpdateEvent(period, 0.0, self._update)
         self.DeclareVectorOutputPort("panda.torque_command", NQ, self._calc,
                                      prerequisites_of_calc={self.xd_ticket()})
+        self.DeclareVectorOutputPort(
+            "driver.ticks_held", 1,
+            lambda c, o: o.SetAtIndex(0, c.get_discrete_state(self._xd).get_value()[TICKS_HELD]),
+            prerequisites_of_calc={self.xd_ticket()})
 
     def _update(self, context, discrete_state):
         s = context.get_discrete_state(self._xd).get_value()

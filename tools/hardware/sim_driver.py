@@ -73,7 +73,9 @@ class SimDriver:
     plant: object
     command: object         # FrankaTorqueDriver
     command_health: object  # PANDA_COMMAND's ChannelHealth (undecodable commands)
-    logs: dict              # name -> VectorLogSink: ball_true (13), panda_state (14), tau (7)
+    unsafe: object          # ArmUnsafeMonitor
+    logs: dict              # name -> VectorLogSink: ball_true (13), panda_state (14), tau (7),
+                            # unsafe (3: ArmUnsafeMonitor's output)
     true_radius: float      # m, the true ball
     ball_start: np.ndarray
     ee_radius: float        # m, the EE tip sphere
@@ -94,6 +96,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     from adaptive_c3.models.ball_rolling_controller_model import default_state
     from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene
     from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
+    from adaptive_c3.systems.franka.arm_unsafe_monitor import ArmUnsafeMonitor
     from adaptive_c3.systems.franka.franka_driver_rules import TICK_S
     from adaptive_c3.systems.franka.franka_torque_driver import FrankaTorqueDriver
     from adaptive_c3.tools.hardware.sampled_subscriber import SampledLcmSubscriber
@@ -134,7 +137,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     driver = builder.AddSystem(GravityCompensatedDriver())
     state = plant.get_state_output_port(scene.panda)
     builder.Connect(state, cmd.GetInputPort("panda.state"))
-    builder.Connect(cmd.get_output_port(), driver.GetInputPort("panda.torque_command"))
+    builder.Connect(cmd.GetOutputPort("panda.torque_command"), driver.GetInputPort("panda.torque_command"))
     builder.Connect(state, driver.GetInputPort("panda.state"))
     builder.Connect(driver.GetOutputPort("panda.actuation"),
                     plant.get_actuation_input_port(scene.panda))
@@ -143,7 +146,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     from drake import lcmt_panda_status
     status = builder.AddSystem(StatusSender(clock))
     builder.Connect(state, status.GetInputPort("panda.state"))
-    builder.Connect(cmd.get_output_port(), status.GetInputPort("panda.torque_command"))
+    builder.Connect(cmd.GetOutputPort("panda.torque_command"), status.GetInputPort("panda.torque_command"))
     pub = builder.AddSystem(LcmPublisherSystem.Make(
         STATUS_CHANNEL, lcmt_panda_status, lcm, status_period))
     builder.Connect(status.get_output_port(), pub.get_input_port())
@@ -160,15 +163,25 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
         BALL_CHANNEL, lcmt_robot_state, lcm, 1.0 / cam.rate_hz))
     builder.Connect(enc.get_output_port(), ball_pub.get_input_port())
 
+    # the driver's own record of the robot being unsafe (torque at its limit, a joint
+    # at its limit, the ball off the table), in its clock
+    unsafe = builder.AddSystem(ArmUnsafeMonitor(clock, R_true))
+    builder.Connect(state, unsafe.GetInputPort("panda.state"))
+    builder.Connect(cmd.GetOutputPort("panda.torque_command"), unsafe.GetInputPort("panda.torque"))
+    builder.Connect(plant.get_state_output_port(scene.ball), unsafe.GetInputPort("ball.state"))
+    builder.Connect(cmd.GetOutputPort("driver.ticks_held"),
+                    unsafe.GetInputPort("driver.ticks_held"))
+
     logs = {}
     for name, port in (("ball_true", plant.get_state_output_port(scene.ball)),
-                       ("panda_state", state), ("tau", cmd.get_output_port())):
+                       ("panda_state", state), ("tau", cmd.GetOutputPort("panda.torque_command")),
+                       ("unsafe", unsafe.get_output_port())):
         sink = builder.AddSystem(VectorLogSink(port.size(), log_period))
         builder.Connect(port, sink.get_input_port())
         logs[name] = sink
     diagram = builder.Build()
     diagram.set_name(f"sim_driver[{s.name}]")
-    return SimDriver(diagram, plant, cmd, sub.health, logs, R_true, np.r_[start_xy, R_true], m.ee_radius,
+    return SimDriver(diagram, plant, cmd, sub.health, unsafe, logs, R_true, np.r_[start_xy, R_true], m.ee_radius,
                      (tuple(s.target.center), s.target.radius))
 
 
@@ -197,7 +210,44 @@ def driver_summary(drv: SimDriver, context) -> dict:
             "first_contact_s": None if first is None else float(ball.sample_times()[5 * first]),
             "circle_turns": max(circle_progress(b[:, 4:6], *drv.target), 0.0),
             **drv.command.counts(dctx),
-            "commands_undecodable": drv.command_health.undecodable}
+            "commands_undecodable": drv.command_health.undecodable,
+            **drv.unsafe.report(drv.diagram.GetSubsystemContext(drv.unsafe, context)),
+            "unsafe_episodes": unsafe_episodes(drv.logs["unsafe"].FindLog(context).data())}
+
+
+def unsafe_episodes(log, limit: int = 100) -> list:
+    """[start, end (the driver's clock, s since the epoch), unsafe s accrued, reasons] for
+    each stretch of the unsafe log (ArmUnsafeMonitor's output, one column per sample)
+    in which unsafe_s grew; the first `limit`."""
+    from adaptive_c3.systems.franka.arm_unsafe_tally import reasons
+    out, cur = [], None
+    for k in range(1, log.shape[1]):
+        grew = log[1, k] > log[1, k - 1]
+        if grew and cur is None:
+            cur = [float(log[0, k - 1]), float(log[0, k]), 0.0, 0]
+        if grew:
+            cur[1], cur[2], cur[3] = float(log[0, k]), cur[2] + float(log[1, k] - log[1, k - 1]), \
+                cur[3] | int(log[2, k])
+        elif cur is not None:
+            out.append(cur[:3] + [reasons(cur[3])])
+            cur = None
+        if len(out) >= limit:
+            break
+    if cur is not None and len(out) < limit:
+        out.append(cur[:3] + [reasons(cur[3])])
+    return out
+
+
+def unsafe_before(episodes, epoch_s: float | None) -> float:
+    """Unsafe seconds (unsafe_episodes) accrued before epoch_s (None: all), spreading
+    each episode's time evenly over it."""
+    total = 0.0
+    for start, end, secs, _ in episodes:
+        if epoch_s is None or end <= epoch_s:
+            total += secs
+        elif start < epoch_s:
+            total += secs * (epoch_s - start) / (end - start)
+    return total
 
 
 def cmd_sim_driver(args) -> int:
