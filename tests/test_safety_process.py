@@ -202,3 +202,26 @@ def _run_impedance_command(end, lcm, s, proc):
     else:
         assert proc.returncode == 3 and saf["breach"] == "status_stale"
         assert [line for line in err.splitlines() if "SAFE STOP" in line]
+
+
+def test_unstable_gain_in_closed_loop_with_the_simulated_driver(capsys):
+    """Lock-step with the simulated driver (memq://): a stiffness of 1e5 N/m pins the
+    torques at their limits within ~0.1 s. Old: the loop kept commanding them (the
+    driver applied a torque at its limit for the rest of the run). Now: a safe stop;
+    the driver then applies no torque at its limit for more than 50 ms."""
+    from adaptive_c3.models.panda_kinematics import TAU_MAX
+    from adaptive_c3.tools.hardware.split_loopback import run_split_loopback
+    s = scenario("impedance.translational_stiffness=100000", "impedance.ee_tilt_deg=15")
+    out = run_split_loopback(s, 0.6)
+    h = out["_"]
+    tau = h["driver"].logs["tau"].FindLog(h["sims"][0].get_context()).data().T   # every 10 ms
+    at_limit = (np.abs(tau) >= 0.99 * TAU_MAX).any(axis=1)
+    longest = run = 0
+    for hit in at_limit:
+        run = run + 1 if hit else 0
+        longest = max(longest, run)
+    assert longest <= 5, longest                   # at most 50 ms in a row
+    saf = out["safety"]
+    assert saf["state"] == "safe_stop" and saf["breach"] == "torque_saturation", saf
+    assert out["driver"]["commands_received"] <= 1e3 * saf["breach_t_s"] + 300 + 1
+    assert "torque_saturation" in capsys.readouterr().err
