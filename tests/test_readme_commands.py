@@ -2,7 +2,9 @@
 parses against today's CLI, its command answers `--help`, and the quick ones run for
 real (shortened, into a temporary folder); every `make X` there is a Makefile target.
 
-Commands are read from the README each time, so a rewritten README is checked as it is.
+Commands are read from the README each time, so a rewritten README is checked as it is;
+the commands in docs/*.md are parsed and asked for --help too (not run). Blocks fenced
+as ```text, ```yaml, ```json or ```python are not read.
 Real runs: `run` (sim_duration_s cut to 0.3 s, not `--meshcat`) and `bench lcp` (--quick)
 in the default suite; `sweep` and the other bench suites (one trial a cell, 0.3 s;
 --quick) with `-m slow` (make test-slow). Commands that need a rig, a recording or a browser (hardware,
@@ -23,14 +25,19 @@ README = REPO / "README.md"
 SHORT_S = 0.3
 
 
+NOT_SHELL = ("text", "yaml", "json", "python")   # fenced blocks that hold no commands
+
+
 def code_block_lines(text: str) -> list:
-    """The lines inside ``` fences, with backslash continuations joined."""
-    lines, inside, pending = [], False, ""
+    """The lines inside ``` fences (not ```text, ```yaml, ...), with backslash
+    continuations joined."""
+    lines, inside, shell, pending = [], False, True, ""
     for line in text.splitlines():
         if line.lstrip().startswith("```"):
             inside, pending = not inside, ""
+            shell = line.lstrip()[3:].strip().lower() not in NOT_SHELL
             continue
-        if not inside:
+        if not inside or not shell:
             continue
         line = pending + line.strip()
         if line.endswith("\\"):
@@ -78,6 +85,8 @@ def command_path(argv: list) -> list:
 TEXT = README.read_text()
 COMMANDS = readme_commands(TEXT)
 IDS = [" ".join(c)[:60] for c in COMMANDS]
+DOCS = sorted((REPO / "docs").glob("*.md"))
+DOC_COMMANDS = [(p.name, argv) for p in DOCS for argv in readme_commands(p.read_text())]
 
 
 def test_the_readme_shows_commands():
@@ -87,6 +96,17 @@ def test_the_readme_shows_commands():
 
 @pytest.mark.parametrize("argv", COMMANDS, ids=IDS)
 def test_readme_command_parses_and_has_help(argv, capsys):
+    _parses_and_has_help(argv, capsys)
+
+
+@pytest.mark.parametrize("page,argv", DOC_COMMANDS or [pytest.param(None, None, marks=pytest.mark.skip("no docs"))],
+                         ids=[f"{p}: {' '.join(a)[:50]}" for p, a in DOC_COMMANDS] or None)
+def test_docs_command_parses_and_has_help(page, argv, capsys):
+    """The commands in docs/*.md: parsed and --help only (none is run)."""
+    _parses_and_has_help(argv, capsys)
+
+
+def _parses_and_has_help(argv, capsys):
     if "--help" not in argv and "-h" not in argv:
         try:
             build_parser().parse_args(argv)   # every flag and argument shown exists
