@@ -65,7 +65,10 @@ def cmd_run(args) -> int:
 def cmd_bench(args) -> int:
     from adaptive_c3.tools.bench.runner import run_suites
     suites = list(BENCH_SUITES) if args.suite == "all" else [args.suite]
-    run_suites({s: BENCH_SUITES[s] for s in suites}, json_path=args.json, quick=args.quick)
+    if args.overload is not None and args.suite != "bridge":
+        raise UserError("--overload is for `bench bridge` only")
+    run_suites({s: BENCH_SUITES[s] for s in suites}, json_path=args.json, quick=args.quick,
+               options={"overload": args.overload})
     return 0
 
 
@@ -116,6 +119,10 @@ def build_parser() -> argparse.ArgumentParser:
     bench.add_argument("suite", nargs="?", default="all", choices=["all", *BENCH_SUITES])
     bench.add_argument("--json", default=None, help="write the results to this JSON file")
     bench.add_argument("--quick", action="store_true", help="fewer repeats (a smoke test)")
+    bench.add_argument("--overload", type=int, default=None, metavar="N",
+                       help="bridge: run the three processes without real-time priority and "
+                       "with N busy processes beside them; rows bridge/overload/unsafe_s and "
+                       "bridge/overload/outcome")
     bench.set_defaults(func=cmd_bench)
 
     diag = sub.add_parser("diagnose", help="find where a recording and the model disagree")
@@ -201,7 +208,9 @@ def build_parser() -> argparse.ArgumentParser:
     imp = controller_process(
         "impedance", "the 1 kHz loop alone: PANDA_STATUS + EE_PLAN -> PANDA_COMMAND (torque mode, "
         "stamped with the status utime), watchdog, plan hold/timeout, robot_mode gate", "cmd_impedance")
-    imp.add_argument("--stale-ms", type=float, default=50.0, help="status older than this -> zero torque")
+    imp.add_argument("--stale-ms", type=float, default=50.0,
+                     help="no new status for this long -> safe stop (the scenario's "
+                          "safety.status_gap_s where that is smaller)")
     imp.add_argument("--period", type=float, default=1e-3,
                      help="tick, s: one per PANDA_STATUS, or per period of silence")
     imp.add_argument("--rt-priority", type=int, default=70,
@@ -212,6 +221,9 @@ def build_parser() -> argparse.ArgumentParser:
     pl.add_argument("--nice", type=int, default=0,
                     help="nice value (e.g. -10: ahead of ordinary work on the machine, still "
                          "behind the SCHED_FIFO driver and impedance loop)")
+    pl.add_argument("--stale-ms", type=float, default=100.0,
+                    help="no new PANDA_STATUS for this long: stop planning and wait for the "
+                    "robot's first messages again")
     pl.add_argument("--delay-ms", type=float, default=0.0,
                     help="hold every plan back this long before sending it (an injected latency)")
 
