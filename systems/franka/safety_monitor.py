@@ -17,6 +17,7 @@ A BREACH (-> stopping; one line on stderr naming it and its numbers; `report()["
   plan_stale         the plan's utime > plan_max_age_s behind the newest status's
   ball_stale         no usable BALL_ESTIMATE for > ball_max_age_s (once one came)
   torque_saturation  a joint's requested torque at its limit for > saturation_s
+                     (each joint's own run, as the driver-side tally counts it)
   joint_limit        a joint within joint_margin_deg of the Panda's limit
   ee_speed           EE tip speed > ee_speed_max (m/s)
   workspace          EE tip outside [workspace_min, workspace_max] (m, base frame)
@@ -24,7 +25,9 @@ A BREACH (-> stopping; one line on stderr naming it and its numbers; `report()["
                      that many and at least half of a channel's over a rate window
   watchdog           the torque watchdog refused the command (e.g. non-finite request)
 A requested stop (end of the run, SIGINT/SIGTERM) damps the same way; its state is
-"stopped". WARNINGS (one line per kind every warn_interval_s at most, all counted):
+"stopped". So does a status stream that ends within END_GRACE_S of end_t (the run's
+planned end; stop reason "driver_ended"): a simulated driver given the same --duration
+stops publishing about then. WARNINGS (one line per kind every warn_interval_s at most, all counted):
 status_rate (< status_warn_rate_hz), plan_rate (< plan_warn_rate_hz).
 The stop's torque is -kd v, kd = stop_damping_scale x the driver's DRIVER_KD, clipped to
 the torque limits; a fresh zero torque would leave a torque-mode Panda undamped.
@@ -40,6 +43,7 @@ from adaptive_c3.models.panda_kinematics import Q_MAX, Q_MIN, TAU_MAX
 
 DRIVER_KD = np.array([37.5, 50.0, 37.5, 25.0, 5.0, 3.75, 2.5])   # N m s/rad (the driver's)
 SAFE_STOP_EXIT = 3      # exit code of a process that ended in a safe stop
+END_GRACE_S = 1.0       # statuses that stop this close to end_t: the driver's run ended
 
 
 def _stderr(line: str) -> None:
@@ -64,8 +68,9 @@ class SafetyMonitor:
         self._pending = None               # a breach found between ticks (name, detail)
         self.warnings = {"status_rate": 0, "plan_rate": 0}
         self._warned_t = {}
-        self._sat_since = None
+        self._sat_since = np.full(len(TAU_MAX), np.nan)   # loop time each joint hit its limit
         self._tick_t = None
+        self.end_t = None                  # loop time the run is to end (None: open)
         self.extremes = {"min_status_rate_hz": None, "min_plan_rate_hz": None,
                          "max_status_gap_ms": 0.0, "max_plan_age_ms": 0.0,
                          "max_saturation_ms": 0.0, "min_joint_margin_deg": None,
@@ -132,8 +137,10 @@ class SafetyMonitor:
             return
         silent = t - self._status_t
         if silent > lim.status_gap_s:
-            return self.stop(t, "status_stale", f"no PANDA_STATUS for {1e3 * silent:.1f} ms "
-                             f"(limit {1e3 * lim.status_gap_s:.0f} ms)")
+            ending = self.end_t is not None and t >= self.end_t - END_GRACE_S
+            return self.stop(t, "driver_ended" if ending else "status_stale",
+                             f"no PANDA_STATUS for {1e3 * silent:.1f} ms (limit "
+                             f"{1e3 * lim.status_gap_s:.0f} ms)", breach=not ending)
         self._peak("max_plan_age_ms", 1e3 * plan_age_s)
         if plan_age_s > lim.plan_max_age_s:
             return self.stop(t, "plan_stale", f"EE_PLAN {1e3 * plan_age_s:.0f} ms older than "
@@ -195,15 +202,15 @@ class SafetyMonitor:
             return self.stop(t, "workspace", "EE tip at [" + ", ".join(f"{a:.3f}" for a in p)
                              + f"] m, outside the box {lo.tolist()} .. {hi.tolist()}")
         at_limit = np.abs(tau_request) >= torque_limits * (1 - 1e-9)
+        since = self._sat_since
+        since[~at_limit] = np.nan
+        since[at_limit & np.isnan(since)] = t
         if not at_limit.any():
-            self._sat_since = None
             return
-        if self._sat_since is None:
-            self._sat_since = t
-        held = t - self._sat_since
+        held = t - np.nanmin(since)
         self._peak("max_saturation_ms", 1e3 * held)
         if held > lim.saturation_s:
-            j = int(np.flatnonzero(at_limit)[0])
+            j = int(np.nanargmin(since))
             self.stop(t, "torque_saturation", f"joint {j + 1} torque at {tau_request[j]:+.1f} "
                       f"N m (limit {torque_limits[j]:g}) for {1e3 * held:.0f} ms "
                       f"(limit {1e3 * lim.saturation_s:.0f} ms)")

@@ -90,6 +90,7 @@ class ImpedanceProcess:
         wait_for_channels(self.lcm, [STATUS_CHANNEL], pump=handle, timeout_s=wait_s,
                           clock=clock)
         start = last = clock()
+        self.tick.safety.end_t = duration
         k = 0
         stamps = np.empty(int(duration / tick_s * 1.5) + 10 if duration else 1_000_000)
         saved = self._catch_signals()

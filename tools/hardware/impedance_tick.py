@@ -28,6 +28,7 @@ little else: ~0.1 ms, against ~0.5 ms as a Simulator tick (README, Hardware over
 """
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -61,7 +62,10 @@ class ImpedanceTick:
 
         from adaptive_c3.diagrams.ball_rolling import make_impedance_law
         self.law = make_impedance_law(s)
-        lim = s.safety
+        # one status gap limit: the scenario's, or --stale-ms where that is tighter (the
+        # safety layer checks it before the watchdog, which keeps its torque limits)
+        lim = dataclasses.replace(s.safety, status_gap_s=min(stale_s, s.safety.status_gap_s))
+        stale_s = lim.status_gap_s
         self.plan = PlanHold(min(plan_hold_s, lim.plan_max_age_s), lim.plan_max_age_s)
         self._ready_us = 1e6 * min(plan_hold_s, lim.plan_max_age_s)
         self.watchdog = WatchdogCore(WatchdogConfig(stale_s=stale_s, rate_limit=rate_limit))
