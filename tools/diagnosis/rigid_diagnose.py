@@ -52,6 +52,7 @@ __all__ = ["EFFECTS", "FAILED_SCORE", "diagnose_rigid", "with_values", "refine_m
 MAX_EFFECTS = 3
 MIN_GAIN = 0.02          # relative validation improvement an effect must bring
 BOOTSTRAP = 2000
+FINE_POINTS = 4          # values added between the coarse grid's best point's neighbours
 
 
 def refine_minimum(grid, means, integer: bool = False) -> float:
@@ -69,6 +70,21 @@ def refine_minimum(grid, means, integer: bool = False) -> float:
     if a <= 0:
         return float(x1)
     return float(np.clip(-b / (2 * a), x0, x2))
+
+
+def _refine_grid(grid, S: np.ndarray, score) -> tuple[list, np.ndarray]:
+    """The grid with FINE_POINTS values spread between the neighbours of its best point
+    (by mean score), and their scores (score(values) -> [values, episodes]) merged in."""
+    i = int(np.argmin(S.mean(axis=1)))
+    lo, hi = grid[max(i - 1, 0)], grid[min(i + 1, len(grid) - 1)]
+    fine = [float(v) for v in np.linspace(lo, hi, FINE_POINTS + 2)[1:-1]
+            if min(abs(v - g) for g in grid) > 1e-12 * max(1.0, abs(v))]
+    if not fine:
+        return list(grid), S
+    merged = np.vstack([S, score(fine)])
+    values = list(grid) + fine
+    order = np.argsort(values)
+    return [float(values[k]) for k in order], merged[order]
 
 
 def bootstrap_interval(grid, S: np.ndarray, rng, integer: bool = False) -> tuple[float, float]:
@@ -151,7 +167,7 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
         return Scorer([xs[e] for e in ids], dt, size, workers, model, [x0s[e] for e in ids])
 
     fit_score, val_score = scorer(fit_ids), scorer(parts["validation"])
-    total = sum(len(e.grid) + 2 for e in chosen_lib) * MAX_EFFECTS + 2
+    total = sum(len(e.grid) + 2 + FINE_POINTS for e in chosen_lib) * MAX_EFFECTS + 2
     bar = Progress(total, f"diagnose ({model}): fitting effects", unit="fits", enabled=progress)
     done = [0]
 
@@ -175,6 +191,10 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
                 grid = sorted(set(eff.grid) | ({here} if here is not None else set()))
                 S = fit_score([with_values(base, {eff.key: v}) for v in grid])
                 tick(len(grid))
+                if not eff.integer:     # coarse to fine: FINE_POINTS between the best's neighbours
+                    grid, S = _refine_grid(grid, S, lambda vs: fit_score(
+                        [with_values(base, {eff.key: v}) for v in vs]))
+                    tick(FINE_POINTS)
                 means = S.mean(axis=1)
                 best = refine_minimum(grid, means, eff.integer)
                 S_best = fit_score([with_values(base, {eff.key: best})])[0]

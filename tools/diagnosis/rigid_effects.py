@@ -58,7 +58,8 @@ EFFECTS = (
 
 NO_LCS = "no LCS counterpart"
 DRAKE_EFFECTS = (
-    RigidEffect("friction", "drake.friction", (0.12, 0.15, 0.17, 0.19, 0.21, 0.24, 0.3),
+    RigidEffect("friction", "drake.friction", (0.12, 0.15, 0.17, 0.19, 0.21, 0.24, 0.28, 0.34,
+                                               0.42),
                 "1", "the friction coefficient differs from the simulation's",
                 lcs="contact.friction"),
     RigidEffect("inertia_scale", "patch.inertia_scale", (0.8, 1.2, 1.4, 1.6, 1.8, 2.0),
