@@ -115,16 +115,17 @@ class ImpedanceTick:
         if status is not None:
             self.receive_status(status)
         mon, st = self.safety, self.status
-        new, gap, plans, ball = self._new, self._gap_us, self.plan.used - self._plans_seen, self._ball
-        self._new, self._plans_seen = 0, self.plan.used
-        self._gap_us, self._ball = 0.0, False
+        new, gap, ball = self._new, self._gap_us, self._ball
+        plans, self._plans_seen = self.plan.used - self._plans_seen, self.plan.used
+        self._new, self._gap_us, self._ball = 0, 0.0, False
         mon.tick(t)
         mon.statuses(t, new, gap)           # (all three: only counted while active)
         mon.plans(plans)
         if ball:
             mon.ball(t)
-        if mon.mode == "waiting" and st is not None and self.plan.age_us(st.utime) <= self._ready_us:
-            mon.start(t)
+        if (mon.mode == "waiting" and st is not None
+                and self.plan.age_us(st.utime) <= self._ready_us):
+            mon.start(t)                    # a status and a plan made from a recent one
         age_s = math.inf if st is None else 1e-6 * self.plan.age_us(st.utime)
         mon.check_timing(t, age_s)
         if mon.mode == "active":
