@@ -35,12 +35,16 @@ SETS = ["camera.enabled=false"]
 
 def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SETS,
                         port: int | None = None, planner_nice: int = -10,
-                        planner_args=()) -> dict:
+                        planner_args=(), realtime: bool = True, overload: int = 0) -> dict:
     """The three processes for `duration` s of wall clock (module doc). planner_nice:
     the planner's nice value (-10: ahead of ordinary work on the machine, behind the
     SCHED_FIFO driver and impedance loop); planner_args: extra planner flags (e.g.
-    --delay-ms). Messages are timed by the kernel (WireListener); the listener runs at
-    SCHED_FIFO 90 when it may all the same, so that its socket never overflows."""
+    --delay-ms). realtime=False: the driver and the impedance loop under the ordinary
+    scheduler (--rt-priority 0) and the planner at nice 0; overload: that many busy
+    processes beside them (bridge_overload.Spinners). Messages are timed by the kernel
+    (WireListener); the listener runs at SCHED_FIFO 90 when it may all the same, so
+    that its socket never overflows. Every output line is kept with the wall-clock
+    time it was read (`read_at`: when each process's summary arrived)."""
     from drake import lcmt_robot_state
 
     from adaptive_c3.scenarios.schema import load_scenario
@@ -77,20 +81,29 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     wire.subscribe("BALL_ESTIMATE", on_ball)
     from adaptive_c3.tools.hardware.realtime_priority import request_fifo
     from adaptive_c3.tools.process_tuning import freeze_heap
-    extra = {"planner": [f"--nice={planner_nice}", *planner_args]}
+    from adaptive_c3.tools.bench.bridge_overload import Spinners, ordinary_scheduling
+    extra = {"planner": [f"--nice={planner_nice if realtime else 0}", *planner_args]}
+    if not realtime:
+        extra.update({"sim-driver": ["--rt-priority", "0"], "impedance": ["--rt-priority", "0"]})
     listener_scheduling = request_fifo(90)
     freeze_heap()
-    procs, lines = {}, {}
+    procs, lines, read_at = {}, {}, {}
+
+    def read(name):
+        for ln in procs[name].stdout:
+            lines[name].append(ln)
+            if ln.startswith("{"):
+                read_at[name] = time.time()
 
     def start(name):
         procs[name] = subprocess.Popen(exe + [name, *args, *extra.get(name, [])],
                                        stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                       text=True)
+                                       text=True, preexec_fn=ordinary_scheduling)
         lines[name] = []
-        reader = threading.Thread(target=lambda: lines[name].extend(procs[name].stdout),
-                                  daemon=True)
+        reader = threading.Thread(target=read, args=(name,), daemon=True)
         reader.start()
         return reader
+    spinners = Spinners(overload)
     # The controllers start first and wait, built, for the robot's first messages (as
     # they would beside a running robot, but without three processes importing and
     # building at once on two cores: that start-up alone made 50-100 ms gaps)
@@ -102,16 +115,27 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
         time.sleep(0.05)
     readers.append(start("sim-driver"))
     try:
+        # the controllers end on the wall clock; the driver, which may run behind real
+        # time, is then ended (SIGTERM: it writes its summary) once both have
         deadline = time.monotonic() + duration + 60
-        while time.monotonic() < deadline and any(p.poll() is None for p in procs.values()):
+        while time.monotonic() < deadline and any(procs[n].poll() is None
+                                                  for n in ("planner", "impedance")):
+            wire.handle(0.005)
+        quiet = time.monotonic() + 1.0        # the driver's hold after the last command
+        while time.monotonic() < quiet and procs["sim-driver"].poll() is None:
             wire.handle(0.005)
     finally:
         wire.close()
+        spinners.stop()
         for p in procs.values():
             if p.poll() is None:
                 p.terminate()
     for p in procs.values():
-        p.wait()
+        try:
+            p.wait(30)
+        except subprocess.TimeoutExpired:
+            p.kill()
+            p.wait()
     for r in readers:
         r.join(timeout=5)
     outputs = {n: "".join(ln) for n, ln in lines.items()}
@@ -153,27 +177,54 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
                 learner_rate_hz=plan.get("learner_rate_hz"),
                 first_contact_s=first, pushes_before_contact=pushes,
                 circle_turns=max(circle_progress(ball, tgt.center, tgt.radius), 0.0),
-                listener_scheduling=listener_scheduling, processes=summaries)
+                listener_scheduling=listener_scheduling, processes=summaries,
+                exit_codes={n: p.returncode for n, p in procs.items()}, read_at=read_at,
+                status_rate_hz=(len(status_t) / (status_t[-1] - status_t[0])
+                                if len(status_t) > 1 else 0.0),
+                realtime=realtime, overload=overload, spinners=spinners.count)
 
 
-def run_bench(quick: bool = False) -> list[dict]:
+def run_bench(quick: bool = False, overload: int | None = None) -> list[dict]:
+    """overload None: the ordinary run (real-time priority); N >= 0: --overload N
+    (bridge_overload.py). Either way each row says whether the run was valid."""
+    from adaptive_c3.scenarios.schema import load_scenario
+    from adaptive_c3.tools.bench.bridge_overload import overload_rows, validity
+    from adaptive_c3.tools.user_input import resolve_scenario_path
     duration = 10.0 if quick else 90.0
-    r = run_three_processes(duration)
+    if overload is not None and not (0 <= overload <= 64):
+        from adaptive_c3.tools.user_input import UserError
+        raise UserError(f"--overload must be in [0, 64], got {overload}")
+    loaded = overload is not None
+    r = run_three_processes(duration, realtime=not loaded, overload=overload or 0)
+    s, _ = load_scenario(resolve_scenario_path("ball_rolling"), list(SETS))
+    reasons = validity(r, s.safety)
+    r["valid"], r["invalid_reasons"] = not reasons, reasons
     out = Path("runs/bridge")
     out.mkdir(parents=True, exist_ok=True)
-    (out / "three_processes.json").write_text(json.dumps(r, indent=1, default=float))
+    name = f"overload{overload}.json" if loaded else "three_processes.json"
+    (out / name).write_text(json.dumps(r, indent=1, default=float))
+    print(f"bench bridge: run {'VALID' if not reasons else 'INVALID: ' + '; '.join(reasons)}"
+          f" (status {r['status_rate_hz']:.0f} Hz, EE_PLAN {r['plan_rate_hz']:.0f} Hz, exit "
+          f"codes {r['exit_codes']})", flush=True)
     per = r["command_period_ms"]
-    return [
+    valid = {"valid": not reasons, "invalid_reasons": reasons}
+    rows = [
         {"name": "bridge/command_period_p99_ms", "median_ms": per["p50"], "value": per["p99"],
          "max_ms": per["max"], "commands": r["commands"], "duration_s": duration,
-         "impedance_tick_ms": r["impedance_tick_ms"], "status_period_ms": r["status_period_ms"]},
+         "impedance_tick_ms": r["impedance_tick_ms"], "status_period_ms": r["status_period_ms"],
+         "status_rate_hz": r["status_rate_hz"], **valid},
         {"name": "bridge/expired_fraction", "median_ms": per["p50"],
-         "value": r["expired_fraction"]},
+         "value": r["expired_fraction"], **valid},
         {"name": "bridge/circles_90s", "median_ms": per["p50"],
          "value": r["circle_turns"] * 90.0 / duration, "circle_turns": r["circle_turns"],
          "first_contact_s": r["first_contact_s"],
-         "pushes_before_contact": r["pushes_before_contact"]},
+         "pushes_before_contact": r["pushes_before_contact"], **valid},
         {"name": "bridge/planner_latency_p99_ms", "median_ms": r["planner_latency_ms"]["p50"],
          "value": r["planner_latency_ms"]["p99"], "plan_rate_hz": r["plan_rate_hz"],
-         "c3_solve_ms": r["c3_solve_ms"], "learner_rate_hz": r["learner_rate_hz"]},
+         "c3_solve_ms": r["c3_solve_ms"], "learner_rate_hz": r["learner_rate_hz"], **valid},
     ]
+    if loaded:
+        rows = overload_rows(r, rows)
+        print(f"bench bridge --overload {overload}: unsafe_s = {rows[0]['value']:.3f}, "
+              f"outcome {rows[1]['value']} ({rows[1]['reason']})", flush=True)
+    return rows

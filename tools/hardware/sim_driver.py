@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json
 import math
+import signal
 import time
 from dataclasses import dataclass
 
@@ -285,6 +286,10 @@ def cmd_sim_driver(args) -> int:
           f"{COMMAND_CHANNEL} at {args.lcm_url} for {duration:g} s", flush=True)
     start = time.perf_counter()
     t = 0.0
+
+    def on_term(_signum, _frame):      # SIGTERM ends the run like Ctrl-C: with the summary
+        raise KeyboardInterrupt
+    signal.signal(signal.SIGTERM, on_term)
     try:
         while t < duration - 1e-12:
             t = min(t + 0.1, duration)

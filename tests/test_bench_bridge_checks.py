@@ -1,0 +1,75 @@
+"""`bench bridge`'s own checks (issue 31, items 4 and 5) without running the processes:
+the validity of a run, the overload rows, and the machine reference in every bench JSON."""
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from adaptive_c3.scenarios.schema import load_scenario
+from adaptive_c3.tools import cli
+from adaptive_c3.tools.bench.bridge_overload import overload_rows, safe_stop, validity
+
+
+def _run(**over):
+    r = {"status_rate_hz": 998.0, "plan_rate_hz": 200.0, "duration_s": 90.0,
+         "overload": 2, "realtime": False, "circle_turns": 0.4,
+         "command_period_ms": {"p50": 1.0, "p99": 3.0, "max": 9.0},
+         "exit_codes": {"planner": 0, "impedance": 0, "sim-driver": 0},
+         "read_at": {"impedance": 1000.0},
+         "processes": {"sim-driver": {"scheduling": "SCHED_FIFO 80", "unsafe_s": 0.5,
+                                      "unsafe_total_s": 0.5,
+                                      "unsafe_episodes": [[990.0, 990.2, 0.2, ["joint_near_limit"]],
+                                                          [995.0, 995.3, 0.3, ["ball_off_table"]]]},
+                       "impedance": {"scheduling": "SCHED_FIFO 70", "wall_s": 20.0,
+                                     "safety": {"state": "ok"}},
+                       "planner": {}}}
+    r.update(over)
+    return r
+
+
+def _safety():
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), ["camera.enabled=false"])
+    return s.safety
+
+
+def test_validity_names_each_broken_timing_assumption():
+    assert validity(_run(), _safety()) == []
+    r = _run(status_rate_hz=420.0, plan_rate_hz=44.0)
+    r["processes"]["impedance"]["scheduling"] = "SCHED_OTHER (not requested)"
+    reasons = validity(r, _safety())
+    assert len(reasons) == 3
+    assert "420 Hz" in reasons[0] and "impedance" in reasons[1] and "EE_PLAN at 44" in reasons[2]
+
+
+def test_overload_rows_count_unsafe_time_only_before_the_safe_stop():
+    rows = overload_rows(_run(), [])
+    assert [r["name"] for r in rows] == ["bridge/overload/unsafe_s", "bridge/overload/outcome"]
+    assert rows[0]["value"] == pytest.approx(0.5) and rows[1]["value"] == "rolled"
+    r = _run()
+    # the loop breached at its t = 12 s and wrote its summary at t = 20 s, read at 1000
+    # (wall clock): the stop began at 992, after the first episode, before the second
+    r["processes"]["impedance"]["safety"] = {"state": "safe_stop", "breach": "status_gap",
+                                             "breach_detail": "two statuses 131 ms apart",
+                                             "breach_t_s": 12.0}
+    assert safe_stop(r) == ("status_gap: two statuses 131 ms apart", pytest.approx(992.0))
+    rows = overload_rows(r, [{"name": "bridge/circles_90s", "median_ms": 1.0, "value": 0.0}])
+    assert rows[0]["value"] == pytest.approx(0.2)
+    assert rows[1]["value"] == "safe_stop" and "status_gap" in rows[1]["reason"]
+    assert rows[2]["name"] == "bridge/overload/circles_90s"
+    assert all("value" in row for row in rows)
+
+
+def test_every_bench_json_has_the_machine_reference(tmp_path, capsys):
+    from adaptive_c3.tools.bench.runner import run_suites
+    run_suites({}, json_path=tmp_path / "b.json")
+    rows = json.loads((tmp_path / "b.json").read_text())["results"]
+    names = [r["name"] for r in rows]
+    assert names == ["machine/python", "machine/drake"]
+    assert all(r["median_ms"] > 0 for r in rows)
+
+
+def test_overload_is_for_bench_bridge_only(capsys):
+    assert cli.main(["bench", "lcp", "--overload", "2"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "--overload" in err[0]

@@ -1,0 +1,130 @@
+"""`bench bridge --overload N`, and whether a `bench bridge` run was valid.
+
+Overload: the three processes (bridge.py) without real-time priority (the driver and the
+impedance loop under the ordinary scheduler, the planner at nice 0) and N busy processes
+beside them (pure-Python spin loops, `Spinners`) - what a user gets on a shared machine
+without the hardware checklist. Rows, each with a `value`:
+  bridge/overload/unsafe_s   seconds (of the simulated driver's time) in which the driver
+                             saw the arm unsafe - a torque at its limit for over 50 ms, a
+                             joint within 2 deg of its limit, the ball off the table
+                             (systems/franka/arm_unsafe_tally.py) - under the controller's
+                             commands and before the impedance loop's safe stop began
+  bridge/overload/outcome    "safe_stop" (with the breach the impedance loop named) or
+                             "rolled" (the run reached its end; circle_turns says how far)
+and the ordinary bridge rows under bridge/overload/ (marked invalid: no real-time
+priority).
+
+Validity (every bridge run): the run's timing assumptions are that PANDA_STATUS arrives at
+>= 900 Hz (the safety layer's status_warn_rate_hz), that the driver and the impedance loop
+run under SCHED_FIFO, and that EE_PLAN arrives at >= the safety layer's plan_warn_rate_hz
+(180 Hz; the planner sends one every 5 ms). A run that misses any is marked
+`valid: false` with the reasons, in its rows and on stdout.
+"""
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+
+SPIN = "while True:\n    pass\n"
+
+
+def ordinary_scheduling() -> None:
+    """(A Popen preexec_fn.) The child under SCHED_OTHER, not the SCHED_FIFO the bench's
+    listener runs at: a child inherits its parent's policy, so the planner and
+    `--rt-priority 0` processes would otherwise run at SCHED_FIFO 90, and a busy
+    spinner there would take a core from everything else."""
+    if hasattr(os, "sched_setscheduler"):
+        os.sched_setscheduler(0, os.SCHED_OTHER, os.sched_param(0))
+
+
+def _spinner_setup() -> None:
+    ordinary_scheduling()
+    try:                               # die with the bench, whatever ends it (Linux)
+        import ctypes
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)   # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+
+
+class Spinners:
+    """`count` busy pure-Python processes (ordinary scheduling) until stop()."""
+
+    def __init__(self, count: int):
+        self.count = int(count)
+        self._procs = [subprocess.Popen([sys.executable, "-c", SPIN], preexec_fn=_spinner_setup)
+                       for _ in range(self.count)]
+
+    def stop(self) -> None:
+        for p in self._procs:
+            if p.poll() is None:
+                p.kill()
+            p.wait()
+        self._procs = []
+
+
+def validity(r: dict, safety) -> list:
+    """The reasons the run `r` (run_three_processes) is not valid (empty: valid).
+    safety: the scenario's SafetyLimits (the rates)."""
+    reasons = []
+    if r["status_rate_hz"] < safety.status_warn_rate_hz:
+        reasons.append(f"PANDA_STATUS at {r['status_rate_hz']:.0f} Hz < "
+                       f"{safety.status_warn_rate_hz:.0f} Hz")
+    for name in ("sim-driver", "impedance"):
+        sched = str(r["processes"].get(name, {}).get("scheduling", "unknown"))
+        if not sched.startswith("SCHED_FIFO"):
+            reasons.append(f"{name} without real-time priority ({sched})")
+    if r["plan_rate_hz"] < safety.plan_warn_rate_hz:
+        reasons.append(f"EE_PLAN at {r['plan_rate_hz']:.0f} Hz < "
+                       f"{safety.plan_warn_rate_hz:.0f} Hz")
+    return reasons
+
+
+def safe_stop(r: dict):
+    """(breach text, its wall-clock time) of the impedance loop's safe stop, or None.
+    The time is when the loop's summary was read minus the loop's own time from the
+    breach to its end: late by the summary's way to this process, so the unsafe time
+    counted before it errs on the high side."""
+    imp = r["processes"].get("impedance", {})
+    safety = imp.get("safety") or {}
+    if safety.get("state") != "safe_stop":
+        return None
+    at = None
+    read = r.get("read_at", {}).get("impedance")
+    if read is not None and imp.get("wall_s") is not None and safety.get("breach_t_s") is not None:
+        at = read - (float(imp["wall_s"]) - float(safety["breach_t_s"]))
+    text = f"{safety.get('breach')}: {safety.get('breach_detail', '')}".strip(": ")
+    return text, at
+
+
+def overload_rows(r: dict, base_rows: list) -> list:
+    """The overload rows from run `r`, then `base_rows` (bridge.py's) renamed under
+    bridge/overload/."""
+    from adaptive_c3.tools.hardware.sim_driver import unsafe_before
+    drv = r["processes"].get("sim-driver", {})
+    stop = safe_stop(r)
+    episodes = drv.get("unsafe_episodes")
+    unsafe = (unsafe_before(episodes, stop[1] if stop else None)
+              if episodes is not None else float("nan"))
+    per = r["command_period_ms"]
+    common = {"overload": r["overload"], "realtime": r["realtime"],
+              "duration_s": r["duration_s"], "valid": r.get("valid", False),
+              "invalid_reasons": r.get("invalid_reasons", [])}
+    if stop:
+        outcome, reason = "safe_stop", stop[0]
+    elif "error" in drv or "unsafe_s" not in drv:
+        outcome, reason = "no_result", "the driver wrote no summary"
+    else:
+        outcome, reason = "rolled", f"ran to the end: {r['circle_turns']:.2f} circle turns"
+    rows = [
+        {"name": "bridge/overload/unsafe_s", "median_ms": per["p50"], "value": unsafe,
+         "driver_unsafe_s": drv.get("unsafe_s"), "driver_unsafe_total_s": drv.get("unsafe_total_s"),
+         "unsafe_by_reason_s": drv.get("unsafe_by_reason_s"), **common},
+        {"name": "bridge/overload/outcome", "median_ms": per["p50"], "value": outcome,
+         "reason": reason, "circle_turns": r["circle_turns"],
+         "exit_codes": r.get("exit_codes"), **common},
+    ]
+    for row in base_rows:
+        rows.append({**row, "name": row["name"].replace("bridge/", "bridge/overload/", 1)})
+    return rows
