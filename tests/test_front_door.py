@@ -205,3 +205,31 @@ def test_nonfinite_recording_error_names_plain_indices(tmp_path):
         load_recording(path)
     assert "x[5, 2]" in str(e.value) and "np.int64" not in str(e.value)
     assert "sample 5, c" in str(e.value)
+
+
+def test_sim_loop_keeps_partial_only_when_asked():
+    """Ctrl-C ends a `run`'s loop with what was simulated; elsewhere (studies, benchmarks)
+    it propagates, so nothing goes on with a cut-short simulation."""
+    from adaptive_c3.tools.sim_loop import SimEnd, advance
+
+    class Sim:   # AdvanceTo like Drake's; Ctrl-C arrives during the step past 0.5 s
+        def __init__(self):
+            self.t = 0.0
+
+        def get_context(self):
+            return self
+
+        def get_time(self):
+            return self.t
+
+        def AdvanceTo(self, t):
+            if t > 0.5:
+                raise KeyboardInterrupt
+            self.t = t
+
+    assert advance(Sim(), 1.0, 0.1, keep_partial=True) == SimEnd(pytest.approx(0.5), "interrupted")
+    with pytest.raises(KeyboardInterrupt):
+        advance(Sim(), 1.0, 0.1)
+    assert advance(Sim(), 0.3, 0.1) == SimEnd(pytest.approx(0.3), "completed")
+    stop_at_02 = advance(Sim(), 1.0, 0.1, after_chunk=lambda t: "stopped" if t >= 0.2 else None)
+    assert stop_at_02 == SimEnd(pytest.approx(0.2), "stopped")

@@ -179,7 +179,8 @@ def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate
             req = controls.apply()
             controls.show()
             return "stopped" if req["stop"] else "restart" if req["restart"] else None
-        handles.sim_end = advance(sim, s.sim_duration_s, chunk_s, after_chunk=poll)
+        handles.sim_end = advance(sim, s.sim_duration_s, chunk_s, after_chunk=poll,
+                                  keep_partial=True)
         restart = handles.sim_end.reason == "restart"
         wall = time.perf_counter() - start
         if not restart:

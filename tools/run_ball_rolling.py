@@ -25,10 +25,11 @@ CONTACT_TOL_M = 0.001   # true EE-ball distance counted as contact
 BAND = 0.5              # laps count only within +-BAND * radius of the circle
 
 
-def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
+def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True,
+                          keep_partial: bool = False):
     """Simulate; returns (handles, logs dict name -> (t, data), wall seconds).
-    `handles.sim_end` (tools/sim_loop.SimEnd) says how far it got and how it ended (Ctrl-C
-    ends the simulation, not the process)."""
+    `handles.sim_end` (tools/sim_loop.SimEnd) says how far it got and how it ended; with
+    keep_partial Ctrl-C ends the simulation (logs so far kept), not the process."""
     handles = build_ball_rolling_diagram(scenario, meshcat=meshcat)
     simulator = Simulator(handles.diagram)
     context = simulator.get_mutable_context()
@@ -37,7 +38,8 @@ def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True):
     bar = Progress(T, f"ball rolling [{scenario.name}]", enabled=None if progress else False)
     with frozen_heap():
         start = time.perf_counter()
-        handles.sim_end = advance(simulator, T, max(T / 100, 0.05), bar=bar)
+        handles.sim_end = advance(simulator, T, max(T / 100, 0.05), bar=bar,
+                                  keep_partial=keep_partial)
         wall = time.perf_counter() - start
     bar.close(handles.sim_end.t)
     return handles, read_logs(handles, context), wall
@@ -139,7 +141,7 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         print(f"Meshcat: {mc.web_url()}", flush=True)
         handles, logs, wall = simulate_interactive(scenario, mc)
     else:
-        handles, logs, wall = simulate_ball_rolling(scenario)
+        handles, logs, wall = simulate_ball_rolling(scenario, keep_partial=True)
     t, x = logs["lcs_state"]
     _, u = logs["lcs_input"]
     _, r = logs["r_comp"]

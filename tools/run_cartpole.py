@@ -33,10 +33,11 @@ def closed_loop_cost(x, u, q_diag, r_diag, dt) -> float:
     return float(dt * (np.sum(x * x * np.asarray(q_diag)) + np.sum(u * u * np.asarray(r_diag))))
 
 
-def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None):
+def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None,
+                      keep_partial: bool = False):
     """Simulate the scenario; returns (handles, logs dict name -> (t, data), wall seconds).
-    `handles.sim_end` (tools/sim_loop.SimEnd) says how far it got and how it ended (Ctrl-C
-    ends the simulation, not the process).
+    `handles.sim_end` (tools/sim_loop.SimEnd) says how far it got and how it ended; with
+    keep_partial Ctrl-C ends the simulation (logs so far kept), not the process.
 
     model_lcs (optional) replaces the controller's model LCS (see build_cartpole_diagram)."""
     handles = build_cartpole_diagram(scenario, model_lcs)
@@ -48,7 +49,8 @@ def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None):
     bar = Progress(scenario.sim_duration_s, progress_label)
     start = time.perf_counter()
     handles.sim_end = advance(simulator, scenario.sim_duration_s,
-                              max(scenario.sim_duration_s / 50, 0.01), bar=bar)
+                              max(scenario.sim_duration_s / 50, 0.01), bar=bar,
+                              keep_partial=keep_partial)
     wall = time.perf_counter() - start
     bar.close(handles.sim_end.t)
     logs = {name: _log(logger, context) for name, logger in handles.loggers.items()}
@@ -63,7 +65,7 @@ def _generator(seed):
 
 
 def run_cartpole(scenario, scenario_text: str, out: Path) -> dict:
-    handles, logs, wall = simulate_cartpole(scenario)
+    handles, logs, wall = simulate_cartpole(scenario, keep_partial=True)
     t, x = logs["x"]
     _, u = logs["u"]
     _, lam = logs["lambda"]

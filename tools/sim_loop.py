@@ -2,9 +2,10 @@
 to the scenario's duration, and say how far it got and why it ended.
 
 A run ends "completed" (the scenario's sim_duration_s reached), "stopped" (Meshcat's
-Stop button) or "interrupted" (Ctrl-C). Ctrl-C ends the loop instead of the process, so
-the runner still writes log.npz and summary.json for what was simulated; the summary's
-`sim_duration_s` is the simulated time reached, not the scenario's request.
+Stop button) or "interrupted" (Ctrl-C). For `run` (keep_partial) Ctrl-C ends the loop
+instead of the process, so the runner still writes log.npz and summary.json for what
+was simulated; the summary's `sim_duration_s` is the simulated time reached, not the
+scenario's request.
 """
 from __future__ import annotations
 
@@ -21,26 +22,35 @@ class SimEnd:
     reason: str = "completed"
 
 
-def advance(simulator, duration: float, chunk: float, after_chunk=None, bar=None) -> SimEnd:
+def advance(simulator, duration: float, chunk: float, after_chunk=None, bar=None,
+            keep_partial: bool = False) -> SimEnd:
     """AdvanceTo(duration) in steps of `chunk` seconds; `bar.update(t)` after each.
     `after_chunk(t)` may return a reason ("stopped", or anything the caller handles, e.g.
-    "restart") to end early. Ctrl-C ends the loop with reason "interrupted"; the
-    simulator's logs then hold what was simulated up to that point."""
+    "restart") to end early. With keep_partial, Ctrl-C ends the loop with reason
+    "interrupted" (the simulator's logs then hold what was simulated up to that point);
+    without it, KeyboardInterrupt propagates (studies and benchmarks must not go on with
+    a cut-short simulation)."""
     t = simulator.get_context().get_time()
-    reason = "completed"
+    if not keep_partial:
+        return _advance(simulator, t, duration, chunk, after_chunk, bar)
     try:
-        while t < duration - 1e-12:
-            t = min(t + chunk, duration)
-            simulator.AdvanceTo(t)
-            if bar is not None:
-                bar.update(t)
-            if after_chunk is not None:
-                request = after_chunk(t)
-                if request:
-                    reason = request
-                    break
+        return _advance(simulator, t, duration, chunk, after_chunk, bar)
     except KeyboardInterrupt:
-        reason = "interrupted"
+        return SimEnd(float(simulator.get_context().get_time()), "interrupted")
+
+
+def _advance(simulator, t, duration, chunk, after_chunk, bar) -> SimEnd:
+    reason = "completed"
+    while t < duration - 1e-12:
+        t = min(t + chunk, duration)
+        simulator.AdvanceTo(t)
+        if bar is not None:
+            bar.update(t)
+        if after_chunk is not None:
+            request = after_chunk(t)
+            if request:
+                reason = request
+                break
     return SimEnd(float(simulator.get_context().get_time()), reason)
 
 
