@@ -248,3 +248,20 @@ def test_sim_driver_measures_unsafe_time_of_a_saturating_controller():
     assert episodes and "torque_at_limit" in episodes[0][3]
     assert unsafe_before(episodes, None) == pytest.approx(out["unsafe_s"], abs=0.011)
     assert unsafe_before(episodes, episodes[0][0]) == 0.0
+
+
+@pytest.mark.slow
+def test_three_os_processes_survive_garbage_on_every_channel():
+    """sim-driver + impedance + planner over udpm, 8 s, one undecodable message on each
+    of PANDA_STATUS, PANDA_COMMAND, BALL_ESTIMATE and EE_PLAN every 0.5 s: every process
+    writes its summary with the counts, and none stops for the garbage (single messages,
+    not a run of them)."""
+    from adaptive_c3.tools.bench.bridge import run_three_processes
+    r = run_three_processes(8.0, inject_garbage_s=0.5)
+    p = r["processes"]
+    assert r["garbage_sent"] >= 10
+    assert sum(p["planner"]["undecodable_messages"].values()) > 0
+    assert p["planner"]["safety"]["state"] == "ok" and r["exit_codes"]["planner"] == 0
+    assert p["impedance"]["undecodable_messages"] > 0
+    assert p["impedance"]["safety"].get("breach") != "malformed_input"
+    assert p["sim-driver"]["commands_undecodable"] > 0 and r["exit_codes"]["sim-driver"] == 0

@@ -35,7 +35,8 @@ SETS = ["camera.enabled=false"]
 
 def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SETS,
                         port: int | None = None, planner_nice: int = -10,
-                        planner_args=(), realtime: bool = True, overload: int = 0) -> dict:
+                        planner_args=(), realtime: bool = True, overload: int = 0,
+                        inject_garbage_s: float | None = None) -> dict:
     """The three processes for `duration` s of wall clock (module doc). planner_nice:
     the planner's nice value (-10: ahead of ordinary work on the machine, behind the
     SCHED_FIFO driver and impedance loop); planner_args: extra planner flags (e.g.
@@ -44,7 +45,9 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     processes beside them (bridge_overload.Spinners). Messages are timed by the kernel
     (WireListener); the listener runs at SCHED_FIFO 90 when it may all the same, so
     that its socket never overflows. Every output line is kept with the wall-clock
-    time it was read (`read_at`: when each process's summary arrived)."""
+    time it was read (`read_at`: when each process's summary arrived). inject_garbage_s:
+    every that many seconds, one undecodable message on each of the four channels (a
+    check that all three processes survive it; `not_ours` counts what the listener saw)."""
     from drake import lcmt_robot_state
 
     from adaptive_c3.scenarios.schema import load_scenario
@@ -59,26 +62,41 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
     args = [scenario, "--lcm-url", url, "--duration", str(duration)]
     for kv in sets:
         args += ["--set", kv]
+    from drake import lcmt_panda_command, lcmt_panda_status
     wire = WireListener(url)
     cmd_t, cmd_age, plan_age, ball, status_t = [], [], [], [], []
+    not_ours = {}               # channel -> messages with another type's fingerprint
 
-    def utime(data) -> int:
+    def typed(channel, lcm_type, callback):
         # an LCM message is an 8-byte fingerprint, then its fields; all three types here
         # start with int64 utime. Reading just that keeps the listener light
-        return struct.unpack_from(">q", data, 8)[0]
+        fingerprint = lcm_type._get_packed_fingerprint()
 
-    def on_command(arrival, d):
+        def on_message(arrival, d):
+            if len(d) < 16 or d[:8] != fingerprint:
+                not_ours[channel] = not_ours.get(channel, 0) + 1
+                return
+            callback(arrival, d, struct.unpack_from(">q", d, 8)[0])
+        wire.subscribe(channel, on_message)
+
+    def on_command(arrival, d, utime):
         cmd_t.append(arrival)
-        cmd_age.append(arrival - 1e-6 * utime(d))
-    wire.subscribe("PANDA_COMMAND", on_command)
-    wire.subscribe("PANDA_STATUS", lambda arrival, d: status_t.append(arrival))
-    wire.subscribe(PLAN_CHANNEL, lambda arrival, d: plan_age.append(arrival - 1e-6 * utime(d)))
+        cmd_age.append(arrival - 1e-6 * utime)
+    typed("PANDA_COMMAND", lcmt_panda_command, on_command)
+    typed("PANDA_STATUS", lcmt_panda_status, lambda arrival, d, _u: status_t.append(arrival))
+    typed(PLAN_CHANNEL, lcmt_robot_state,
+          lambda arrival, d, utime: plan_age.append(arrival - 1e-6 * utime))
 
-    def on_ball(arrival, d):
-        b = decode_ball_estimate(lcmt_robot_state.decode(d))
+    def on_ball(arrival, d, _utime):
+        try:
+            b = decode_ball_estimate(lcmt_robot_state.decode(d))
+        except Exception:       # the right fingerprint, a broken body
+            not_ours["BALL_ESTIMATE"] = not_ours.get("BALL_ESTIMATE", 0) + 1
+            return
         if np.all(np.isfinite(b)):
             ball.append(b[:2])
-    wire.subscribe("BALL_ESTIMATE", on_ball)
+    typed("BALL_ESTIMATE", lcmt_robot_state, on_ball)
+    garbage = _GarbageSender(url, inject_garbage_s) if inject_garbage_s else None
     from adaptive_c3.tools.hardware.realtime_priority import request_fifo
     from adaptive_c3.tools.process_tuning import freeze_heap
     from adaptive_c3.tools.bench.bridge_overload import Spinners, ordinary_scheduling
@@ -121,6 +139,8 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
         while time.monotonic() < deadline and any(procs[n].poll() is None
                                                   for n in ("planner", "impedance")):
             wire.handle(0.005)
+            if garbage:
+                garbage.maybe_send()
         quiet = time.monotonic() + 1.0        # the driver's hold after the last command
         while time.monotonic() < quiet and procs["sim-driver"].poll() is None:
             wire.handle(0.005)
@@ -181,7 +201,27 @@ def run_three_processes(duration: float, scenario: str = "ball_rolling", sets=SE
                 exit_codes={n: p.returncode for n, p in procs.items()}, read_at=read_at,
                 status_rate_hz=(len(status_t) / (status_t[-1] - status_t[0])
                                 if len(status_t) > 1 else 0.0),
-                realtime=realtime, overload=overload, spinners=spinners.count)
+                realtime=realtime, overload=overload, spinners=spinners.count,
+                not_ours=not_ours, garbage_sent=garbage.sent if garbage else 0)
+
+
+class _GarbageSender:
+    """One undecodable message on each channel every `every_s` seconds."""
+    CHANNELS = ("PANDA_STATUS", "PANDA_COMMAND", "BALL_ESTIMATE", "EE_PLAN")
+
+    def __init__(self, url: str, every_s: float):
+        from pydrake.lcm import DrakeLcm
+        self._lcm, self._every, self._next, self.sent = DrakeLcm(url), every_s, None, 0
+
+    def maybe_send(self) -> None:
+        now = time.monotonic()
+        if self._next is None:
+            self._next = now + self._every
+        if now >= self._next:
+            for ch in self.CHANNELS:
+                self._lcm.Publish(ch, b"\x00not an LCM message of this channel's type")
+            self.sent += 1
+            self._next = now + self._every
 
 
 def run_bench(quick: bool = False, overload: int | None = None) -> list[dict]:
