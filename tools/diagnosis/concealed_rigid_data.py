@@ -1,9 +1,10 @@
 """Synthetic tosses with known physics, for checking the rigid-object diagnosis.
 
-Tosses of the scenario's box are simulated with Drake's SAP plant
-(tools/diagnosis/drake_baseline.py: 8 corner spheres on a half space) whose friction,
-table height or size differ from the scenario by known amounts; the diagnosis of the
-scenario's rigid LCS model on them should name those effects with intervals around them.
+Tosses of the scenario's box are simulated by the `drake` model backend
+(tools/diagnosis/drake_backend.py: Drake's SAP plant, 8 corner spheres on a half space, at
+the recording's dt / 4) whose friction, table height or size differ from the scenario by
+known amounts; the diagnosis of the scenario's model (either backend) on them should name
+those effects with intervals around them.
 Starts are drawn like the real cube tosses: 10-16 cm up, 0.4-1.2 m/s sideways, falling
 at up to 0.5 m/s, spinning at up to 6 rad/s about a random axis, a random orientation.
 """
@@ -46,7 +47,7 @@ def concealed_tosses(scenario, episodes: int, steps: int, seed: int, dt: float =
     """A recording of `episodes` tosses of `steps` + 1 samples from Drake SAP with the truth
     (friction / table_offset / size_offset), positions with noise_m Gaussian noise and
     velocities as the backward differences of the noisy positions (as the real data)."""
-    from adaptive_c3.tools.diagnosis.drake_baseline import DrakeRigidSimulator
+    from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator
     rng = np.random.default_rng(seed)
     sim = DrakeRigidSimulator(truth_scenario(scenario, **truth), dt)
     xs, ts, eps = [], [], []
