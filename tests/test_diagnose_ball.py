@@ -45,18 +45,22 @@ def test_library_targets_for_ball_rolling(scenario):
     assert {"contact_stiffness", "actuator_delay"} <= set(skipped)
 
 
-def test_unpatched_step_is_the_anitescu_lcs(scenario, short_draw):
-    """The batched model's one step equals AnitescuLinearizer.linearize + Lcs.step."""
+@pytest.mark.parametrize("gate", [None, 5e-4])
+def test_unpatched_step_is_the_anitescu_lcs(scenario, short_draw, gate):
+    """The batched model's one step equals AnitescuLinearizer.linearize + Lcs.step (with
+    and without the open-pair gate, the same on both sides)."""
     from adaptive_c3.models.ball_rolling_controller_model import ball_rolling_linearizer
     from adaptive_c3.tools.diagnosis.effects_ball import POS
     rec = short_draw[0]
     spec = _spec(scenario)
+    spec.open_pair_tol = gate
     spec.prepare(rec)
     W = make_windows(rec, 1)
     X, _ = rollout(patch(spec, []), W.X0, W.U, 1, LAG, W.row)
     p = spec.params
     lin = ball_rolling_linearizer(dt=spec.dt, ee_mass=p.ee_mass, ball_mass=p.ball_mass,
                                   ball_radius=p.ball_radius, ee_radius=p.ee_radius, mu=p.mu)
+    lin.open_pair_tol = gate
     for k in range(0, len(W), 23):
         x = W.X0[k].copy()
         x[POS] = spec.cache["psmooth"][W.row[k]]

@@ -29,11 +29,11 @@ Units and conventions:
 - Open pairs (`open_pair_tol`): Anitescu's relaxed cone lets an OPEN pair act. Edge
   row j, φ/dt + J_n v + μ d_jᵀ J_t v >= 0, binds while φ < dt (μ |v_t| − v_n), so a
   body sliding past another a few mm away is pushed or braked (at dt = 0.01 s and
-  0.4 m/s of slip, ~4 mm of reach). With `open_pair_tol` set (m), a pair out of reach
-  at the nominal point, φ > dt max(0, −J_n v*) + open_pair_tol (it does not close
-  within the step at its approach speed), keeps only its non-penetration rows (μ = 0 in
-  its J_c rows): no friction; closed and closing pairs are unchanged. None (default)
-  = the paper's model.
+  0.4 m/s of slip, ~4 mm of reach). With `open_pair_tol` set (m), a pair's μ in its J_c
+  rows is scaled by `open_pair_scale(φ − dt max(0, −J_n v*))`: 1 while the pair is
+  closed or closes within the step at its approach speed (to the tolerance), 0 once it
+  is more than tol + 1 mm out of that reach (non-penetration rows only, no friction),
+  linear between so the model stays continuous. None (default) = the paper's model.
 - Geometry (φ, witness points, J_n, J_t) comes from the double plant's SceneGraph
   (ComputeSignedDistancePairClosestPoints) and CalcJacobianTranslationalVelocity;
   only M and the bias term go through AutoDiff (one pass, reused contexts).
@@ -52,6 +52,14 @@ from adaptive_c3.systems.contact.lcs import Lcs
 
 
 OPEN_PAIR_TOL = 5e-4   # m, the default gap tolerance of the open-pair gate (module doc)
+OPEN_PAIR_RAMP = 1e-3  # m, the gate takes friction from mu to 0 over this much more gap
+
+
+def open_pair_scale(gap, tol: float = OPEN_PAIR_TOL, ramp: float = OPEN_PAIR_RAMP):
+    """Friction factor in [0, 1] of a pair with the given reach-corrected gap (m): 1 up
+    to tol, 0 beyond tol + ramp, linear between (continuous in the state and in a
+    fitted gap offset)."""
+    return np.clip((tol + ramp - np.asarray(gap, float)) / ramp, 0.0, 1.0)
 
 
 @dataclass(frozen=True)
@@ -294,9 +302,10 @@ class AnitescuLinearizer:
         f, J_f, M, M_inv, phi, J_n, J_t, normals, N, N_plus = self._point_terms(x, u)
         q_star = x[:nq]
         mu_e = self._mu_edges
-        if self.open_pair_tol is not None:    # pairs that cannot touch within the step
-            far = phi - dt * np.maximum(0.0, -(J_n @ x[nq:])) > self.open_pair_tol
-            mu_e = np.where(np.repeat(far, self.num_edges), 0.0, mu_e)
+        if self.open_pair_tol is not None:    # pairs out of one step's reach: no friction
+            reach = phi - dt * np.maximum(0.0, -(J_n @ x[nq:]))
+            mu_e = mu_e * np.repeat(open_pair_scale(reach, self.open_pair_tol),
+                                    self.num_edges)
         J_c = self._E_t.T @ J_n + mu_e[:, None] * J_t
         MinvJcT = M_inv @ J_c.T
         Jf_q, Jf_v, Jf_u = J_f[:, :nq], J_f[:, nq:nx], J_f[:, nx:]

@@ -1,11 +1,15 @@
 """Per-effect hit rates of `diagnose` on concealed ball-rolling draws (issue 19's marks).
 
-    python -m adaptive_c3.tools.diagnosis.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR] [--follow-up]
+    python -m adaptive_c3.tools.diagnosis.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
+        [--follow-up] [--no-open-pair-gate]
 
 Each draw (tools/diagnosis/concealed_ball_data.py, with the second-engine variation) is
 diagnosed and scored:
   named          the concealed effect (or none) is the one selected, i.e. named first
   favoured       ... and the verdict is `named` (not ambiguous)
+  confident_right / confident_wrong / ambiguous_with_truth / ambiguous_without_truth
+                 counts of the separate answers (ambiguous is never counted as right);
+                 truth_in_interval: count of draws with the truth in the 95 % interval
   confident_wrong  draws whose verdict is not ambiguous and whose answer is wrong
   in_interval    named, and the effective truth inside the reported 95% interval
   ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
@@ -50,10 +54,21 @@ def _summary(rows) -> dict:
     per = {}
     for r in rows:
         per.setdefault(_label(r["truth"]["name"], r["truth"]["target"]), []).append(r)
+    def count(pred):
+        return sum(bool(pred(r)) for r in rows)
     return dict(
-        draws=len(rows), named=rate(rows, "named"), named_effect_draws=rate(eff, "named"),
+        draws=len(rows),
+        # the separate answers (an ambiguous verdict is never counted as right)
+        confident_right=count(lambda r: r["verdict"] != "ambiguous" and r["named"]),
+        confident_wrong=count(lambda r: r["verdict"] != "ambiguous" and not r["named"]),
+        ambiguous_with_truth=count(lambda r: r["verdict"] == "ambiguous"
+                                   and r["in_ambiguous_set"]),
+        ambiguous_without_truth=count(lambda r: r["verdict"] == "ambiguous"
+                                      and not r["in_ambiguous_set"]),
+        named_first=count(lambda r: r["named"]),
+        truth_in_interval=count(lambda r: r["in_interval"]),
+        named=rate(rows, "named"), named_effect_draws=rate(eff, "named"),
         favoured=rate(rows, "favoured"), none_on_clean=rate(clean, "named"),
-        confident_wrong=sum(r["verdict"] != "ambiguous" and not r["named"] for r in rows),
         clean_draws=len(clean), coverage=rate(named_eff, "in_interval"),
         named_effect_count=len(named_eff), ambiguous_draws=len(amb),
         truth_in_ambiguous=rate(amb, "in_ambiguous_set"),
@@ -67,6 +82,21 @@ def _summary(rows) -> dict:
                                                      "ambiguous"], "in_ambiguous_set"),
                             in_interval=rate(v, "in_interval")) for k, v in sorted(per.items())},
         targets=TARGETS)
+
+
+def answer_line(summary) -> str:
+    """One line of the separate answers, e.g. 'confident right 9/21, ...'."""
+    n = summary["draws"]
+    parts = [f"confident right {summary['confident_right']}/{n}",
+             f"confident wrong {summary['confident_wrong']}/{n}",
+             f"ambiguous with the truth {summary['ambiguous_with_truth']}/{n}",
+             f"ambiguous without {summary['ambiguous_without_truth']}/{n}",
+             f"named first {summary['named_first']}/{n}",
+             f"truth in the 95 % interval {summary['truth_in_interval']}/{n}"]
+    if summary.get("median_excess_cut") is not None:
+        parts.append(f"median excess-over-noise cut {summary['median_excess_cut']:.2f}x "
+                     "(named effect draws)")
+    return ", ".join(parts)
 
 
 def plot(summary, path: Path) -> None:
@@ -113,6 +143,10 @@ def run(draws: int, first_seed: int, out: Path, **kw) -> dict:
         (out / "ball_hit_rate.json").write_text(
             json.dumps(dict(summary=summary, rows=rows), indent=1, default=float))
     plot(summary, out / "ball_hit_rate.png")
+    print("one recording: " + answer_line(summary), flush=True)
+    if "after_follow_up" in summary:
+        print(f"after {summary['after_follow_up']['follow_ups']} follow-up recordings: "
+              + answer_line(summary["after_follow_up"]), flush=True)
     return summary
 
 
@@ -131,9 +165,13 @@ def main(argv=None) -> int:
     ap.add_argument("--out", default="runs/ball_hit_rate")
     ap.add_argument("--follow-up", action="store_true",
                     help="record again with the proposed excitation on ambiguous verdicts")
+    ap.add_argument("--no-open-pair-gate", action="store_true",
+                    help="diagnose with Anitescu's relaxed cone on open pairs too (the model "
+                         "before issue 30: BallSpec.open_pair_tol = None)")
     args = ap.parse_args(argv)
+    kw = dict(spec_overrides=dict(open_pair_tol=None)) if args.no_open_pair_gate else {}
     print(json.dumps(run(args.draws, args.first_seed, Path(args.out),
-                         follow_up=args.follow_up), indent=1))
+                         follow_up=args.follow_up, **kw), indent=1))
     return 0
 
 

@@ -338,18 +338,20 @@ def judged_fields(result, truth) -> dict:
 
 
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: bool = False,
-               **kw) -> dict:
+               spec_overrides: dict | None = None, **kw) -> dict:
     """Draw, diagnose (and run the SINDy baseline), score against the concealed truth.
     follow_up: when the verdict is ambiguous, record again with the gait change the
     report proposes (as its user would), diagnose both recordings together and score
-    that under row["follow_up"] (same keys)."""
+    that under row["follow_up"] (same keys). spec_overrides: BallSpec fields to set
+    (e.g. open_pair_tol=None, the model before issue 30)."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
     from adaptive_c3.tools.diagnosis.ball_excitation import merge_changes
     from adaptive_c3.tools.recording import concat_recordings
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     kw.setdefault("params", ModelParams.from_scenario(scenario))
     rec, truth, clean = concealed_draw(seed, **kw)
-    row = _score(seed, rec, clean, truth, scenario, baseline, pairs, kw.get("vary", True))
+    row = _score(seed, rec, clean, truth, scenario, baseline, pairs, kw.get("vary", True),
+                 spec_overrides)
     proposals = row.pop("proposals")
     if follow_up and row["verdict"] == "ambiguous" and proposals:
         change = merge_changes(p.get("excitation", {}) for p in proposals)
@@ -357,18 +359,20 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: 
         rec2, _, clean2 = concealed_draw(seed, follow_up=change, **kw2)
         both = concat_recordings([rec, rec2])
         row2 = _score(seed, both, np.concatenate([clean, clean2]), truth, scenario, False,
-                      pairs, kw.get("vary", True))
+                      pairs, kw.get("vary", True), spec_overrides)
         row2.pop("proposals")
         row["follow_up"] = dict(row2, excitation=change)
     return row
 
 
-def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary) -> dict:
+def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary, spec_overrides=None) -> dict:
     from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
     from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
     var = draw_variation(seed, vary)
     spec = ball_spec(scenario)
+    for key, value in (spec_overrides or {}).items():
+        setattr(spec, key, value)
     result = diagnose(rec, spec, progress=False, pairs=pairs)
     eff = Truth(truth.name, truth.target, effective_truth_value(truth, var), truth.unit)
     row = score_diagnosis(seed, rec, eff, clean, spec, result, baseline,

@@ -15,8 +15,14 @@ parameter set is rebuilt with a few batched products (no Drake call):
   v+      = v_free + M'^-1 J_c' lam ,  q+ = q + dt N(q*) v+
   J_c     = E_t' J_n + mu J_t ,   F = J_c M'^-1 J_c' + eps_c I
 
-This is exactly `AnitescuLinearizer.linearize(x_k, u_k, dt)` stepped by `Lcs.step`
-when no effect is applied (checked in tests). Effects: contact_offset (delta per pair,
+Open pairs: Anitescu's relaxed cone lets an open pair act (edge row j binds while
+phi < dt (mu |v_t| - v_n)), so a ball rolling under an EE 2-4 mm above it is braked.
+With `BallSpec.open_pair_tol` set, each pair's mu is scaled per window and step by
+anitescu_lcs.open_pair_scale of its reach-corrected gap phi + J_n N+ (q - q*) + delta -
+dt max(0, -J_n v): full friction to the tolerance, none 1 mm beyond it (the same gate
+as `AnitescuLinearizer(open_pair_tol=...)` at the linearisation point).
+With open_pair_tol=None this is exactly `AnitescuLinearizer.linearize(x_k, u_k, dt)`
+stepped by `Lcs.step` when no effect is applied (checked in tests). Effects: contact_offset (delta per pair,
 m; c += delta / dt), r_comp (delta on both pairs), friction_coefficient (mu per pair),
 mass_scale (the ball's block of M^-1), external_force (a constant force on the ball,
 N), viscous_damping (-b v on the ball), rolling_resistance (a torque coef * m g
@@ -32,6 +38,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from adaptive_c3.systems.contact.anitescu_lcs import OPEN_PAIR_TOL, open_pair_scale
 from adaptive_c3.systems.contact.lcp import solve_lcp
 from adaptive_c3.tools.diagnosis.effects import SystemSpec, delayed_inputs
 
@@ -162,6 +169,12 @@ class BallSpec(SystemSpec):
         "mass_scale": (0.2, 0.2), "friction_coefficient[ee_ball]": (0.5, np.inf),
         "viscous_damping": (np.inf, 0.1), "rolling_resistance": (np.inf, 5e-4),
         "external_force": (0.01, 0.01), "contact_offset": (1e-3, 1e-3)})
+    # m: a pair open by more than this (beyond its approach in one step) loses its
+    # friction over the next 1 mm (the relaxed cone's open-pair reach, module doc);
+    # None = Anitescu's relaxed cone on every pair.
+    # 0.5 mm: ~3x the smoothed start positions' noise (0.5 mm / ~3), so a closed contact
+    # that the noise shows slightly open keeps its friction
+    open_pair_tol: float | None = OPEN_PAIR_TOL
     cache: dict = field(default_factory=dict)
 
     def prepare(self, rec) -> None:
@@ -239,6 +252,23 @@ class BallPatched:
         self.JnP = np.einsum("ij,tjk->tik", Et, c["JnP"]) / self.spec.dt   # [T, 8, 6]
         self.A = self.spec.lcs.A
 
+    def gated(self, Jc, F, gap_rows, V, idx):
+        """(Jc, F) with each pair's mu scaled by open_pair_scale of its gap less its
+        approach in one step at the velocities V [W, 9] (module doc)."""
+        c, ne, dt = self.spec.cache, self.spec.num_edges, self.spec.dt
+        Jn = c["Jn"][idx]                                                 # [W, 2, 9]
+        reach = dt * (gap_rows[:, ::ne] - np.maximum(0.0, -np.einsum("wij,wj->wi", Jn, V)))
+        scale = open_pair_scale(reach, self.spec.open_pair_tol)           # [W, 2]
+        w = np.flatnonzero((scale < 1.0).any(1))
+        if not len(w):
+            return Jc, F
+        Jc, F = Jc.copy(), F.copy()
+        mu_e = np.repeat(self.mu[None, :] * scale[w], ne, axis=1)         # [w, 8]
+        Jc[w] = np.einsum("ij,wjk->wik", self.Et, Jn[w]) + mu_e[:, :, None] * c["Jt"][idx[w]]
+        F[w] = (np.einsum("wij,jk,wlk->wil", Jc[w], self.minv, Jc[w])
+                + self.spec.eps_c * np.eye(2 * ne))
+        return Jc, F
+
     def tau(self, X):
         """[W, 9] generalized forces of the effects at states X."""
         tau = np.broadcast_to(self.tau_const, (len(X), 9)).copy()
@@ -253,10 +283,12 @@ class BallPatched:
     def step(self, X, u, idx, S=None):
         c, dt = self.spec.cache, self.spec.dt
         vfree = X @ c["Av"].T + u @ c["Bv"].T + c["dv"] + dt * self.tau(X) @ self.minv.T
-        Jc = self.Jc[idx]
-        q = (self.c0[idx] + np.einsum("wij,wj->wi", self.JnP[idx], X[:, POS] - c["pstar"][idx])
-             + np.einsum("wij,wj->wi", Jc, vfree))
-        lam, S = batch_lcp_pd(self.F[idx], q, S)
+        Jc, F = self.Jc[idx], self.F[idx]
+        gap_rows = self.c0[idx] + np.einsum("wij,wj->wi", self.JnP[idx],
+                                            X[:, POS] - c["pstar"][idx])   # gap / dt
+        if self.spec.open_pair_tol is not None:
+            Jc, F = self.gated(Jc, F, gap_rows, X[:, VEL], idx)
+        lam, S = batch_lcp_pd(F, gap_rows + np.einsum("wij,wj->wi", Jc, vfree), S)
         v = vfree + np.einsum("wji,wj->wi", Jc, lam) @ self.minv.T
         Xn = np.empty_like(X)
         Xn[:, VEL] = v
