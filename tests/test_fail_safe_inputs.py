@@ -265,3 +265,29 @@ def test_three_os_processes_survive_garbage_on_every_channel():
     assert p["impedance"]["undecodable_messages"] > 0
     assert p["impedance"]["safety"].get("breach") != "malformed_input"
     assert p["sim-driver"]["commands_undecodable"] > 0 and r["exit_codes"]["sim-driver"] == 0
+
+
+def test_single_process_bridge_counts_a_garbage_status():
+    """`hardware` (one process) takes PANDA_STATUS at every message (Drake's
+    LcmSubscriberSystem): a garbage status raised `ValueError: Decode error` there."""
+    from pydrake.lcm import DrakeLcm
+    from pydrake.systems.analysis import Simulator
+
+    from adaptive_c3.tools.hardware.bridge import build_hardware_bridge
+    from adaptive_c3.tools.hardware.status_sender import status_message
+    s = _scenario()
+    lcm = DrakeLcm("memq://")
+    b = build_hardware_bridge(s, lcm)
+    sim = Simulator(b.diagram)
+    sim.Initialize()
+    for k in range(1, 30):
+        if k in (10, 11, 20):
+            lcm.Publish("PANDA_STATUS", GARBAGE)
+            lcm.Publish("BALL_ESTIMATE", GARBAGE)
+        else:
+            lcm.Publish("PANDA_STATUS", status_message(1000 * k, s.impedance.q_null, np.zeros(7),
+                                                       np.zeros(7), 2).encode())
+        sim.AdvanceTo(k * 1e-3)
+    assert b.undecodable() == {"PANDA_STATUS": 3, "BALL_ESTIMATE": 3}
+    rep = b.watchdog.report(b.watchdog.GetMyContextFromRoot(sim.get_context()))
+    assert rep["counts"]["ok"] > 20 and not rep["latched"]

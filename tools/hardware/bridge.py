@@ -63,7 +63,12 @@ class HardwareBridge:
     watchdog: object
     controller: object       # BallRollingController
     logs: dict               # name -> VectorLogSink
-    ball: object             # BallEstimateDecoder
+    ball: object             # BallEstimateDecoder (its .health: BALL_ESTIMATE's)
+    status_health: object = None   # PANDA_STATUS's ChannelHealth (undecodable messages)
+
+    def undecodable(self) -> dict:
+        return {"PANDA_STATUS": self.status_health.undecodable,
+                "BALL_ESTIMATE": self.ball.health.undecodable}
 
 
 def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: float = 0.05,
@@ -98,7 +103,7 @@ def build_hardware_bridge(s, lcm, *, command_period: float = 1e-3, stale_s: floa
         logs[name] = sink
     diagram = builder.Build()
     diagram.set_name(f"lcm_bridge[{s.name}]")
-    return HardwareBridge(diagram, wd, c, logs, ball)
+    return HardwareBridge(diagram, wd, c, logs, ball, status.health)
 
 
 class LcmRecorder:
@@ -221,7 +226,8 @@ def cmd_hardware(args) -> int:
         wait_for=(lcm, [STATUS_CHANNEL, BALL_CHANNEL]))
     wd_ctx = bridge.watchdog.GetMyContextFromRoot(ctx)
     out = {"sim_time_s": float(ctx.get_time()), "wall_s": wall,
-           "watchdog": bridge.watchdog.report(wd_ctx)}
+           "watchdog": bridge.watchdog.report(wd_ctx),
+           "undecodable_messages": bridge.undecodable()}
     print(json.dumps(out, default=float), flush=True)
     return 0
 

@@ -10,7 +10,8 @@ never used. It also keeps
   fresh_at          `clock()` (s) when a message with a utime newer than the last one
                     arrived (None before the first): how stale the channel is
 The planner (planner_run.py) stops planning on a stale status and safe-stops on a run of
-undecodable messages; the simulated driver counts undecodable commands.
+undecodable messages; the simulated driver counts undecodable commands. `tolerant_type`
+gives Drake's LcmSubscriberSystem a message type that decodes through a ChannelHealth.
 """
 from __future__ import annotations
 
@@ -54,3 +55,19 @@ class ChannelHealth:
     def counts(self) -> dict:
         return {"received": self.received, "undecodable": self.undecodable,
                 "worst_undecodable_run": self.worst_run}
+
+
+def tolerant_type(health: ChannelHealth):
+    """A subclass of health's lcm-gen type whose `decode` never raises: a message that
+    does not decode is counted in `health` and the last good message (a default one
+    before any) is returned again - for LcmSubscriberSystem.Make, which otherwise raises
+    `ValueError: Decode error` out of the simulator."""
+    base = health._type
+    last = [base()]
+
+    def decode(data):
+        msg = health.decode(data)
+        if msg is not None:
+            last[0] = msg
+        return last[0]
+    return type(f"Tolerant_{base.__name__}", (base,), {"decode": staticmethod(decode)})

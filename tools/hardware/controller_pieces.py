@@ -22,7 +22,7 @@ from adaptive_c3.tools.hardware.lcm_channels import (BALL_CHANNEL, COMMAND_CHANN
 class StatusInput:
     status: object          # output port: the newest lcmt_panda_status (Python message)
     arm_state: object       # output port: (14) q, v, with q_null / 0 for non-finite values
-    health: object = None   # ChannelHealth of PANDA_STATUS (sampled input only)
+    health: object = None   # ChannelHealth of PANDA_STATUS
 
 
 def add_lcm(builder, lcm):
@@ -34,23 +34,26 @@ def add_lcm(builder, lcm):
 def add_status_input(builder, lcm, s, sample_period: float | None = None) -> StatusInput:
     """PANDA_STATUS decoded once (Python), and as the arm state. sample_period: take the
     newest status every sample_period s (SampledLcmSubscriber) instead of at every
-    message - for a diagram that does not need the driver's 1 kHz; such an input also
-    survives undecodable messages (counted in StatusInput.health)."""
+    message - for a diagram that does not need the driver's 1 kHz. Either way an
+    undecodable message is counted (StatusInput.health) and never used."""
     from drake import lcmt_panda_status
     from pydrake.systems.lcm import LcmSubscriberSystem
 
+    from adaptive_c3.tools.hardware.channel_health import ChannelHealth, tolerant_type
     from adaptive_c3.tools.hardware.sampled_subscriber import SampledLcmSubscriber
     from adaptive_c3.tools.hardware.status_arm_state import StatusArmState
     if sample_period is None:
-        sub = builder.AddSystem(LcmSubscriberSystem.Make(STATUS_CHANNEL, lcmt_panda_status, lcm))
+        health = ChannelHealth(STATUS_CHANNEL, lcmt_panda_status)
+        sub = builder.AddSystem(LcmSubscriberSystem.Make(STATUS_CHANNEL, tolerant_type(health),
+                                                         lcm))
     else:
         sub = builder.AddSystem(SampledLcmSubscriber(STATUS_CHANNEL, lcmt_panda_status, lcm,
                                                      sample_period))
+        health = sub.health
     arm = builder.AddSystem(StatusArmState(np.r_[np.asarray(s.impedance.q_null, float),
                                                  np.zeros(NQ)]))
     builder.Connect(sub.get_output_port(), arm.get_input_port())
-    return StatusInput(sub.get_output_port(), arm.get_output_port(),
-                       getattr(sub, "health", None))
+    return StatusInput(sub.get_output_port(), arm.get_output_port(), health)
 
 
 def add_ball_input(builder, lcm, s, period: float):
