@@ -129,63 +129,54 @@ def _status_like(rig):
     return status_message(1, rig.s.impedance.q_null, np.zeros(7), np.zeros(7), 2).encode()
 
 
-def test_sim_driver_counts_garbage_commands_and_keeps_obeying():
-    """Before: one undecodable PANDA_COMMAND raised `ValueError: Decode error` out of the
-    driver's simulator."""
-    from pydrake.lcm import DrakeLcm
-    from pydrake.systems.analysis import Simulator
-
-    from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
-    from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
-    s = _scenario()
-    lcm = DrakeLcm("memq://")
-    drv = build_sim_driver(s, lcm)
-    status = []
-    lcm.Subscribe("PANDA_STATUS", lambda d: status.append(d))
-    sim = Simulator(drv.diagram)
-    sim.Initialize()
-    from drake import lcmt_panda_status
-    for k in range(1, 301):
-        lcm.HandleSubscriptions(0)
-        utime = lcmt_panda_status.decode(status[-1]).utime
-        if 100 <= k < 107:
-            lcm.Publish("PANDA_COMMAND", GARBAGE)
-        else:
-            lcm.Publish("PANDA_COMMAND", torque_command_message(np.full(7, 0.5), utime).encode())
-        sim.AdvanceTo(k * 1e-3)
-    out = driver_summary(drv, sim.get_context())
-    assert out["commands_undecodable"] == 7
-    assert out["commands_received"] >= 280 and out["commands_expired"] == 0
-    tau = drv.command.GetOutputPort("panda.torque_command").Eval(drv.command.GetMyContextFromRoot(sim.get_context()))
-    assert np.allclose(tau, 0.5, atol=0.05)           # the good commands are obeyed
-
-
-def test_sim_driver_holds_a_killed_controller_and_obeys_a_restarted_one():
-    """As the real driver: commands stop -> the last one expires, the arm is damped
-    (-kd v); a new controller's commands (stamped with the current status) are obeyed."""
+def _drive(steps: int, command, **driver_settings):
+    """The simulated driver alone over memq://, 1 ms steps; command(k, status utime) gives
+    the bytes to publish on PANDA_COMMAND before step k (None: nothing). Returns the
+    driver's summary and its applied torque after every step."""
     from drake import lcmt_panda_status
     from pydrake.lcm import DrakeLcm
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver, driver_summary
-    from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
-    s = _scenario()
     lcm = DrakeLcm("memq://")
-    drv = build_sim_driver(s, lcm)
+    drv = build_sim_driver(_scenario(), lcm, **driver_settings)
     status = []
     lcm.Subscribe("PANDA_STATUS", lambda d: status.append(d))
     sim = Simulator(drv.diagram)
     sim.Initialize()
     ctx = drv.command.GetMyContextFromRoot(sim.get_context())
     taus = {}
-    for k in range(1, 601):
+    for k in range(1, steps + 1):
         lcm.HandleSubscriptions(0)
-        if k <= 200 or k > 400:                       # the controller is dead in between
-            utime = lcmt_panda_status.decode(status[-1]).utime
-            lcm.Publish("PANDA_COMMAND", torque_command_message(np.full(7, 0.5), utime).encode())
+        data = command(k, lcmt_panda_status.decode(status[-1]).utime)
+        if data is not None:
+            lcm.Publish("PANDA_COMMAND", data)
         sim.AdvanceTo(k * 1e-3)
         taus[k] = np.asarray(drv.command.GetOutputPort("panda.torque_command").Eval(ctx))
-    out = driver_summary(drv, sim.get_context())
+    return driver_summary(drv, sim.get_context()), taus
+
+
+def _torques(tau):
+    from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
+    return lambda utime: torque_command_message(tau, utime).encode()
+
+
+def test_sim_driver_counts_garbage_commands_and_keeps_obeying():
+    """Before: one undecodable PANDA_COMMAND raised `ValueError: Decode error` out of the
+    driver's simulator."""
+    good = _torques(np.full(7, 0.5))
+    out, taus = _drive(300, lambda k, utime: GARBAGE if 100 <= k < 107 else good(utime))
+    assert out["commands_undecodable"] == 7
+    assert out["commands_received"] >= 280 and out["commands_expired"] == 0
+    assert np.allclose(taus[300], 0.5, atol=0.05)           # the good commands are obeyed
+
+
+def test_sim_driver_holds_a_killed_controller_and_obeys_a_restarted_one():
+    """As the real driver: commands stop -> the last one expires, the arm is damped
+    (-kd v); a new controller's commands (stamped with the current status) are obeyed."""
+    good = _torques(np.full(7, 0.5))
+    # the controller is dead between 0.2 and 0.4 s
+    out, taus = _drive(600, lambda k, utime: good(utime) if k <= 200 or k > 400 else None)
     assert np.allclose(taus[200], 0.5, atol=0.05) and np.allclose(taus[600], 0.5, atol=0.05)
     assert np.abs(taus[390] - 0.5).max() > 0.4        # held by the driver's damping
     assert out["commands_expired"] == 1 and out["ticks_without_command"] > 80
@@ -218,29 +209,13 @@ def test_unsafe_tally_conditions():
 def test_sim_driver_measures_unsafe_time_of_a_saturating_controller():
     """A controller that pins joint 1 at +87 N m: the driver's summary says how long the
     arm was unsafe under its commands, and when (episodes in the driver's clock)."""
-    from drake import lcmt_panda_status
-    from pydrake.lcm import DrakeLcm
-    from pydrake.systems.analysis import Simulator
-
-    from adaptive_c3.tools.hardware.sim_driver import (build_sim_driver, driver_summary,
-                                                       unsafe_before)
-    from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
-    s = _scenario()
-    lcm = DrakeLcm("memq://")
-    drv = build_sim_driver(s, lcm, low_pass_hz=1000.0)
-    status = []
-    lcm.Subscribe("PANDA_STATUS", lambda d: status.append(d))
-    sim = Simulator(drv.diagram)
-    sim.Initialize()
+    from adaptive_c3.tools.hardware.sim_driver import unsafe_before
     tau = np.zeros(7)
     tau[0] = 87.0
-    for k in range(1, 401):
-        lcm.HandleSubscriptions(0)
-        utime = lcmt_panda_status.decode(status[-1]).utime
-        if k <= 300:                           # then the controller stops: the driver holds
-            lcm.Publish("PANDA_COMMAND", torque_command_message(tau, utime).encode())
-        sim.AdvanceTo(k * 1e-3)
-    out = driver_summary(drv, sim.get_context())
+    pinned = _torques(tau)
+    # then the controller stops at 0.3 s: the driver holds once the last command expires
+    out, _ = _drive(400, lambda k, utime: pinned(utime) if k <= 300 else None,
+                    low_pass_hz=1000.0)
     # the torque reaches its limit after ~90 ms (1000 N m/s), unsafe 50 ms later, until
     # the last command expires at 0.4 s (then the driver's own damping: not counted)
     assert 0.2 < out["unsafe_s"] < 0.3 and out["unsafe_by_reason_s"]["torque_at_limit"] > 0.2
