@@ -27,7 +27,7 @@ import time
 
 import numpy as np
 
-from adaptive_c3.tools.sim_loop import advance
+from adaptive_c3.tools.sim_loop import advance, read_logs
 
 ERROR_SLIDER = "ball err [mm]"
 LR_SLIDER = "learning rate"
@@ -188,8 +188,7 @@ def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate
         s = controls.scenario_for_restart()
         if progress:
             print(f"restart: model error {1e3 * s.model.radius_error:.1f} mm", flush=True)
-    from adaptive_c3.tools.run_ball_rolling import read_logs
-    return handles, read_logs(handles, context), wall
+    return handles, read_logs(handles.logs, context, handles.sim_end), wall
 
 
 __all__ = ["MeshcatControls", "simulate_interactive", "start_meshcat"]

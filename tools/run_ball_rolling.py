@@ -19,7 +19,7 @@ from adaptive_c3.systems.rolling.gait import PHASES
 from adaptive_c3.tools.process_tuning import frozen_heap
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
-from adaptive_c3.tools.sim_loop import advance, ending_fields
+from adaptive_c3.tools.sim_loop import advance, ending_fields, read_logs
 
 CONTACT_TOL_M = 0.001   # true EE-ball distance counted as contact
 BAND = 0.5              # laps count only within +-BAND * radius of the circle
@@ -42,20 +42,7 @@ def simulate_ball_rolling(scenario, meshcat=None, progress: bool = True,
                                   keep_partial=keep_partial)
         wall = time.perf_counter() - start
     bar.close(handles.sim_end.t)
-    return handles, read_logs(handles, context), wall
-
-
-def read_logs(handles, context) -> dict:
-    """The diagram's log sinks as name -> (t [T], data [T, n]). Raises KeyboardInterrupt
-    when a Ctrl-C came before anything was logged (there is nothing to write)."""
-    logs = {}
-    for name, sink in handles.logs.items():
-        log = sink.FindLog(context)
-        logs[name] = (log.sample_times().copy(), log.data().T.copy())
-    end = getattr(handles, "sim_end", None)
-    if end is not None and end.reason == "interrupted" and len(logs["lcs_state"][0]) == 0:
-        raise KeyboardInterrupt
-    return logs
+    return handles, read_logs(handles.logs, context, handles.sim_end), wall
 
 
 def off_table(position) -> bool:

@@ -10,12 +10,7 @@ from pydrake.systems.analysis import Simulator
 from adaptive_c3.diagrams.cartpole import CARTPOLE_Q, CARTPOLE_R, build_cartpole_diagram
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.recording import Recording, save_recording
-from adaptive_c3.tools.sim_loop import advance, ending_fields
-
-
-def _log(logger, context):
-    log = logger.FindLog(context)
-    return log.sample_times().copy(), log.data().T.copy()
+from adaptive_c3.tools.sim_loop import advance, ending_fields, read_logs
 
 
 def time_to_stabilise(t, x, tol):
@@ -53,10 +48,7 @@ def simulate_cartpole(scenario, progress_label="cartpole", model_lcs=None,
                               keep_partial=keep_partial)
     wall = time.perf_counter() - start
     bar.close(handles.sim_end.t)
-    logs = {name: _log(logger, context) for name, logger in handles.loggers.items()}
-    if handles.sim_end.reason == "interrupted" and len(logs["x"][0]) == 0:
-        raise KeyboardInterrupt   # nothing simulated yet: nothing to write
-    return handles, logs, wall
+    return handles, read_logs(handles.loggers, context, handles.sim_end), wall
 
 
 def _generator(seed):

@@ -54,6 +54,20 @@ def _advance(simulator, t, duration, chunk, after_chunk, bar) -> SimEnd:
     return SimEnd(float(simulator.get_context().get_time()), reason)
 
 
+def read_logs(sinks: dict, context, end: SimEnd | None = None) -> dict:
+    """Drake log sinks {name: VectorLogSink} as {name: (t [T], data [T, n])}. Raises
+    KeyboardInterrupt when a Ctrl-C (end.reason "interrupted") came before every sink had
+    a sample: there is nothing to write."""
+    logs = {}
+    for name, sink in sinks.items():
+        log = sink.FindLog(context)
+        logs[name] = (log.sample_times().copy(), log.data().T.copy())
+    if end is not None and end.reason == "interrupted" and any(
+            len(t) == 0 for t, _ in logs.values()):
+        raise KeyboardInterrupt
+    return logs
+
+
 def ending_fields(end: SimEnd | None, requested_s: float, wall_s: float) -> dict:
     """The summary.json fields that say how long the run simulated and how it ended:
     sim_duration_s (reached), sim_duration_requested_s, ended, interrupted,
@@ -65,4 +79,4 @@ def ending_fields(end: SimEnd | None, requested_s: float, wall_s: float) -> dict
             "wall_s": wall_s, "real_time_factor": reached / wall_s if wall_s > 0 else None}
 
 
-__all__ = ["ENDINGS", "SimEnd", "advance", "ending_fields"]
+__all__ = ["ENDINGS", "SimEnd", "advance", "ending_fields", "read_logs"]
