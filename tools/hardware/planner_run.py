@@ -25,12 +25,13 @@ import time
 
 from pydrake.systems.framework import EventStatus
 
+from adaptive_c3.systems.franka.safety_monitor import SAFE_STOP_EXIT   # the impedance's: 3
 from adaptive_c3.tools.hardware.first_messages import (FirstMessages,
                                                        initialise_from_messages,
                                                        wait_for_channels)
 from adaptive_c3.tools.hardware.lcm_channels import BALL_CHANNEL, STATUS_CHANNEL
 
-SAFE_STOP_EXIT = 3      # as systems/franka/safety_monitor.py's (the impedance process)
+__all__ = ["PlannerRun", "SAFE_STOP_EXIT"]
 
 
 def _stderr(line: str) -> None:
