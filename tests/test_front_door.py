@@ -106,11 +106,13 @@ def test_ctrl_c_on_a_sweep_cancels_queued_trials_and_writes_results(tmp_path):
 
 
 def test_meshcat_stop_reports_the_time_simulated(tmp_path, monkeypatch):
-    """Stop after three 50 ms chunks of a 2 s run: the summary says 0.15 s."""
+    """Stop after three 50 ms chunks of a 2 s run: the summary says 0.15 s, and the
+    settings changed live (the circle's radius) are the ones the summary reports."""
     from adaptive_c3.tools import meshcat_controls as M
     apply, polls = M.MeshcatControls.apply, []
 
     def apply_then_stop(self):
+        self.meshcat.SetSliderValue(M.RADIUS_SLIDER, 0.12)
         req = apply(self)
         polls.append(1)
         return {**req, "stop": len(polls) >= 3}
@@ -124,6 +126,7 @@ def test_meshcat_stop_reports_the_time_simulated(tmp_path, monkeypatch):
     assert summary["sim_duration_s"] == pytest.approx(0.15, abs=1e-9)
     assert summary["sim_duration_requested_s"] == 2.0
     assert summary["real_time_factor"] == pytest.approx(0.15 / summary["wall_s"])
+    assert summary["target"]["radius_m"] == pytest.approx(0.12) and summary["restarts"] == 0
 
 
 def test_meshcat_slider_names_fit_with_their_units():

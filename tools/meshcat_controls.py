@@ -84,13 +84,19 @@ class MeshcatControls:
         return 1e-3 * self.meshcat.GetSliderValue(ERROR_SLIDER)
 
     def scenario_for_restart(self):
-        s = self.scenario
-        model = dataclasses.replace(s.model, radius_error=self.model_error_m())
+        """The scenario with every slider's setting, the model error included."""
+        s = self.live_settings(self.scenario)
+        return dataclasses.replace(s, model=dataclasses.replace(
+            s.model, radius_error=self.model_error_m()))
+
+    def live_settings(self, s):
+        """s with the settings the sliders and buttons change live (target circle and
+        lead, learning rate, adaptation on/off); the model error only changes on Restart."""
         target = dataclasses.replace(s.target, radius=self.meshcat.GetSliderValue(RADIUS_SLIDER),
                                      lead_deg=self.meshcat.GetSliderValue(LEAD_SLIDER))
         learner = dataclasses.replace(s.learner, enabled=self.adaptation,
                                       learning_rate=self.meshcat.GetSliderValue(LR_SLIDER))
-        return dataclasses.replace(s, model=model, target=target, learner=learner)
+        return dataclasses.replace(s, target=target, learner=learner)
 
     def attach(self, handles, root_context) -> None:
         """Control this diagram (a BallRollingDiagram) in this root context."""
@@ -158,12 +164,14 @@ def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate
     """The interactive run loop: simulate in chunks, polling the controls between them;
     "Restart" rebuilds with the sliders' settings, "Stop" (or Ctrl-C) ends. Returns
     (handles, logs, wall seconds) of the last episode, like simulate_ball_rolling, with
-    `handles.sim_end` saying how far it got and how it ended."""
+    `handles.sim_end` saying how far it got and how it ended, `handles.scenario_as_run`
+    the last episode's scenario with the live settings at the end, and
+    `handles.restarts` how many times Restart was pressed."""
     from pydrake.systems.analysis import Simulator
 
     from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
     controls = controls or MeshcatControls(meshcat, scenario)
-    s = scenario
+    s, restarts = scenario, 0
     while True:
         meshcat.Delete()
         handles = build_ball_rolling_diagram(s, meshcat=meshcat)
@@ -185,9 +193,10 @@ def simulate_interactive(scenario, meshcat, progress: bool = True, realtime_rate
         wall = time.perf_counter() - start
         if not restart:
             break
-        s = controls.scenario_for_restart()
+        s, restarts = controls.scenario_for_restart(), restarts + 1
         if progress:
             print(f"restart: model error {1e3 * s.model.radius_error:.1f} mm", flush=True)
+    handles.scenario_as_run, handles.restarts = controls.live_settings(s), restarts
     return handles, read_logs(handles.logs, context, handles.sim_end), wall
 
 

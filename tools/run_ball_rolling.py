@@ -129,6 +129,8 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         handles, logs, wall = simulate_interactive(scenario, mc)
     else:
         handles, logs, wall = simulate_ball_rolling(scenario, keep_partial=True)
+    requested_s = scenario.sim_duration_s
+    scenario = getattr(handles, "scenario_as_run", scenario)   # Meshcat: the final settings
     t, x = logs["lcs_state"]
     _, u = logs["lcs_input"]
     _, r = logs["r_comp"]
@@ -139,13 +141,15 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         "scenario": scenario.name,
         "task": "ball_rolling",
         "robot": scenario.robot,
-        **ending_fields(getattr(handles, "sim_end", None), scenario.sim_duration_s, wall),
+        **ending_fields(getattr(handles, "sim_end", None), requested_s, wall),
         "final_state": x[-1].tolist(),
         "state_names": list(STATE_NAMES),
         "object": scenario.model.object,
         "model_radius_m": controller_prior(scenario).model.ball_radius,
         "true_radius_m": handles.true_radius,
         "adaptation": bool(scenario.learner.enabled),
+        "target": {"center_m": list(scenario.target.center), "radius_m": scenario.target.radius,
+                   "lead_deg": scenario.target.lead_deg},
         **rolling_metrics(logs, scenario, handles.true_radius),
         "ball_estimate": estimate_errors(logs),
         "residual_final": r[-1].tolist(),
@@ -156,6 +160,10 @@ def run_ball_rolling(scenario, scenario_text: str, out: Path, meshcat: bool = Fa
         "planner_holds": handles.planner.failures,
         "c3_fallbacks": handles.planner.fallback_counts(),
     }
+    if hasattr(handles, "restarts"):   # interactive: the last episode, its final settings
+        summary.update(restarts=handles.restarts,
+                       model_radius_error_m=scenario.model.radius_error,
+                       learning_rate=scenario.learner.learning_rate)
     _, ball = logs["ball_true"]
     _, ee = logs["ee"]
     _, phase = logs["phase"]
