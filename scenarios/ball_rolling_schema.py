@@ -122,7 +122,7 @@ class SafetyLimits:
     rates only print a warning. Times on the loop's clock unless noted."""
     status_gap_s: float = 0.05           # no new PANDA_STATUS for longer, or two statuses
                                          # further apart (their utime, the driver's clock)
-    status_min_rate_hz: float = 500.0    # PANDA_STATUS over a rate window below this: stop
+    status_min_rate_hz: float = 500.0    # PANDA_STATUS below this in two rate windows running
     status_warn_rate_hz: float = 900.0   # ... below this: warning
     plan_warn_rate_hz: float = 180.0     # EE_PLAN below this: warning (the planner sends
                                          # one every 5 ms while it keeps real time)

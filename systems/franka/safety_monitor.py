@@ -13,7 +13,9 @@ A BREACH (-> stopping; one line on stderr naming it and its numbers; `report()["
   status_stale       no new PANDA_STATUS for > status_gap_s (loop clock)
   loop_stall         the loop itself did not tick for > status_gap_s (starved)
   status_gap         two successive statuses > status_gap_s apart (their utime)
-  status_rate        PANDA_STATUS over a rate_window_s window < status_min_rate_hz
+  status_rate        PANDA_STATUS < status_min_rate_hz in two rate_window_s windows
+                     running (one alone is a warning: a simulated driver starting up
+                     gave 378 Hz over its first 200 ms)
   plan_stale         the plan's utime > plan_max_age_s behind the newest status's
   ball_stale         no usable BALL_ESTIMATE for > ball_max_age_s (once one came)
   torque_saturation  a joint's requested torque at its limit for > saturation_s
@@ -70,6 +72,7 @@ class SafetyMonitor:
         self._warned_t = {}
         self._sat_since = np.full(len(TAU_MAX), np.nan)   # loop time each joint hit its limit
         self._tick_t = None
+        self._slow = None                  # the last window's status rate if below the limit
         self.end_t = None                  # loop time the run is to end (None: open)
         self.extremes = {"min_status_rate_hz": None, "min_plan_rate_hz": None,
                          "max_status_gap_ms": 0.0, "max_plan_age_ms": 0.0,
@@ -167,9 +170,11 @@ class SafetyMonitor:
         for key, hz in (("min_status_rate_hz", status_hz), ("min_plan_rate_hz", plan_hz)):
             ex[key] = hz if ex[key] is None else min(ex[key], hz)
         over = f"over {1e3 * span:.0f} ms"
-        if status_hz < lim.status_min_rate_hz:
-            return self.stop(t, "status_rate", f"PANDA_STATUS at {status_hz:.0f} Hz {over} "
-                             f"(limit {lim.status_min_rate_hz:.0f} Hz)")
+        slow, self._slow = self._slow, (status_hz if status_hz < lim.status_min_rate_hz else None)
+        if slow is not None and self._slow is not None:
+            return self.stop(t, "status_rate", f"PANDA_STATUS at {slow:.0f} Hz, then "
+                             f"{status_hz:.0f} Hz {over} (limit {lim.status_min_rate_hz:.0f} Hz "
+                             "in two windows running)")
         if status_hz < lim.status_warn_rate_hz:
             self._warn(t, "status_rate", f"PANDA_STATUS at {status_hz:.0f} Hz {over} (below "
                        f"{lim.status_warn_rate_hz:.0f} Hz: commands come late)")
