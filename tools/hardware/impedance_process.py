@@ -110,8 +110,8 @@ class ImpedanceProcess:
         except KeyboardInterrupt:
             pass
         finally:
-            for sig, handler in saved.items():
-                signal.signal(sig, handler)
+            for sig, handler in saved.items():     # (None: one not set from Python)
+                signal.signal(sig, signal.SIG_DFL if handler is None else handler)
         periods = 1e3 * np.diff(stamps[:min(k, stamps.size)])
         tick_ms = ({"p50": float(np.median(periods)), "p99": float(np.percentile(periods, 99)),
                     "max": float(periods.max())} if periods.size else {})
