@@ -90,6 +90,7 @@ class ImpedanceProcess:
         wait_for_channels(self.lcm, [STATUS_CHANNEL], pump=handle, timeout_s=wait_s,
                           clock=clock)
         start = last = clock()
+        start_epoch_s = time.time()     # the wall clock at loop time 0 (as the others report)
         self.tick.safety.end_t = duration
         k = 0
         stamps = np.empty(int(duration / tick_s * 1.5) + 10 if duration else 1_000_000)
@@ -115,7 +116,7 @@ class ImpedanceProcess:
         periods = 1e3 * np.diff(stamps[:min(k, stamps.size)])
         tick_ms = ({"p50": float(np.median(periods)), "p99": float(np.percentile(periods, 99)),
                     "max": float(periods.max())} if periods.size else {})
-        return {"wall_s": clock() - start, "ticks": self.ticks,
+        return {"wall_s": clock() - start, "start_epoch_s": start_epoch_s, "ticks": self.ticks,
                 "status_ticks": self.status_ticks, "commands": self.commands,
                 "tick_period_ms": tick_ms, "undecodable_messages": self.undecodable,
                 "signal": self._signal, **self.tick.report()}
