@@ -58,8 +58,9 @@ class SafetyMonitor:
         self._say, self._name = say, name
         self._kd = limits.stop_damping_scale * DRIVER_KD
         self._margin = math.radians(limits.joint_margin_deg)
-        self._box = (np.asarray(limits.workspace_min, float),
-                     np.asarray(limits.workspace_max, float))
+        self._box = ([float(a) for a in limits.workspace_min],
+                     [float(a) for a in limits.workspace_max])
+        self._q = (Q_MIN.tolist(), Q_MAX.tolist())
         self.mode = "waiting"
         self.breach = None                 # (name, detail, t) of the first breach
         self.stop_reason, self.stop_t = None, None
@@ -70,7 +71,7 @@ class SafetyMonitor:
         self._pending = None               # a breach found between ticks (name, detail)
         self.warnings = {"status_rate": 0, "plan_rate": 0}
         self._warned_t = {}
-        self._sat_since = np.full(len(TAU_MAX), np.nan)   # loop time each joint hit its limit
+        self._sat_since = [None] * len(TAU_MAX)   # loop time each joint reached its limit
         self._tick_t = None
         self._slow = None                  # the last window's status rate if below the limit
         self.end_t = None                  # loop time the run is to end (None: open)
@@ -182,43 +183,49 @@ class SafetyMonitor:
             self._warn(t, "plan_rate", f"EE_PLAN at {plan_hz:.0f} Hz {over} (below "
                        f"{lim.plan_warn_rate_hz:.0f} Hz: the planner runs behind)")
 
-    def check_state(self, t: float, q, v, tip, tau_request, torque_limits=TAU_MAX) -> None:
-        """Joint margins (q rad), EE tip speed and box (tip (6): m, m/s, base frame) and
-        torque saturation (tau_request N m, the law's, at most its limits)."""
+    def check_state(self, t: float, q, tip, tau_request, torque_limits=TAU_MAX) -> None:
+        """Joint margins (q (7) rad), EE tip speed and box (tip (6): m, m/s, base frame)
+        and torque saturation (tau_request (7) N m, the law's, at most its limits)."""
         if self.mode != "active":
             return
+        # scalar Python on 7 values: numpy's per-call cost on arrays this small is most
+        # of the work, and this runs every tick
         lim, ex = self.lim, self.extremes
-        margins = np.minimum(q - Q_MIN, Q_MAX - q)
-        j = int(np.argmin(margins))
-        m_deg = math.degrees(margins[j])
-        ex["min_joint_margin_deg"] = (m_deg if ex["min_joint_margin_deg"] is None
-                                      else min(ex["min_joint_margin_deg"], m_deg))
-        if margins[j] < self._margin:
+        q = list(q)
+        m, j = min((min(a - lo, hi - a), i) for i, (a, lo, hi) in enumerate(zip(q, *self._q)))
+        m_deg = math.degrees(m)
+        if ex["min_joint_margin_deg"] is None or m_deg < ex["min_joint_margin_deg"]:
+            ex["min_joint_margin_deg"] = m_deg
+        if m < self._margin:
             return self.stop(t, "joint_limit", f"joint {j + 1} at {q[j]:.4f} rad, {m_deg:.2f} "
                              f"deg from its limit (margin {lim.joint_margin_deg:g} deg)")
-        speed = math.sqrt(float(tip[3:] @ tip[3:]))
+        px, py, pz, vx, vy, vz = (float(a) for a in tip)
+        speed = math.sqrt(vx * vx + vy * vy + vz * vz)
         self._peak("max_ee_speed_m_s", speed)
         if not speed <= lim.ee_speed_max:
             return self.stop(t, "ee_speed", f"EE tip at {speed:.2f} m/s "
                              f"(limit {lim.ee_speed_max:g} m/s)")
         lo, hi = self._box
-        p = tip[:3]
-        if not (np.all(p >= lo) and np.all(p <= hi)):
-            return self.stop(t, "workspace", "EE tip at [" + ", ".join(f"{a:.3f}" for a in p)
-                             + f"] m, outside the box {lo.tolist()} .. {hi.tolist()}")
-        at_limit = np.abs(tau_request) >= torque_limits * (1 - 1e-9)
-        since = self._sat_since
-        since[~at_limit] = np.nan
-        since[at_limit & np.isnan(since)] = t
-        if not at_limit.any():
+        if not all(a <= b <= c for a, b, c in zip(lo, (px, py, pz), hi)):
+            return self.stop(t, "workspace", f"EE tip at [{px:.3f}, {py:.3f}, {pz:.3f}] m, "
+                             f"outside the box {lo} .. {hi}")
+        since, first = self._sat_since, None
+        for i, (tau, cap) in enumerate(zip(list(tau_request), list(torque_limits))):
+            if abs(tau) < cap * (1 - 1e-9):
+                since[i] = None
+                continue
+            if since[i] is None:
+                since[i] = t
+            if first is None or since[i] < since[first]:
+                first = i
+        if first is None:
             return
-        held = t - np.nanmin(since)
+        held = t - since[first]
         self._peak("max_saturation_ms", 1e3 * held)
         if held > lim.saturation_s:
-            j = int(np.nanargmin(since))
-            self.stop(t, "torque_saturation", f"joint {j + 1} torque at {tau_request[j]:+.1f} "
-                      f"N m (limit {torque_limits[j]:g}) for {1e3 * held:.0f} ms "
-                      f"(limit {1e3 * lim.saturation_s:.0f} ms)")
+            self.stop(t, "torque_saturation", f"joint {first + 1} torque at "
+                      f"{tau_request[first]:+.1f} N m (limit {torque_limits[first]:g}) for "
+                      f"{1e3 * held:.0f} ms (limit {1e3 * lim.saturation_s:.0f} ms)")
 
     # ------------------------------------------------------------ the stop
     def stop(self, t: float, name: str, detail: str, *, breach: bool = True) -> None:

@@ -139,17 +139,16 @@ class ImpedanceTick:
         return torque_command_message(tau, st.utime)
 
     def _control(self, t, st):
-        x = np.r_[st.joint_position, st.joint_velocity]
+        x = np.array([*st.joint_position, *st.joint_velocity])
         desired, feedforward, _ = self.plan.target(st.utime)
         arm = self.law.arm
         if st.robot_mode in self._modes:
             tau = self.law.torque(x, desired, feedforward)     # (leaves arm at x)
-            p = arm.tip_pose()[0]
-            tip = np.r_[p, (arm.tip_jacobian() @ x[NQ:])[3:]]
+            tip = (*arm.tip_pose()[0], *(arm.tip_jacobian()[3:] @ x[NQ:]))
         else:
             tau = np.zeros(NQ)
             tip = self.law.tip_state(x)
-        self.safety.check_state(t, x[:NQ], x[NQ:], tip, tau, self.law.gains.torque_limits)
+        self.safety.check_state(t, st.joint_position, tip, tau, self.law.gains.torque_limits)
         if self.safety.mode != "active":
             return None
         tau = self.watchdog.step(self.watchdog_state, t, StatusSample.from_lcm(st), tau)
