@@ -18,8 +18,9 @@ A BREACH (-> stopping; one line on stderr naming it and its numbers; `report()["
                      gave 378 Hz over its first 200 ms)
   plan_stale         the plan's utime > plan_max_age_s behind the newest status's
   ball_stale         no usable BALL_ESTIMATE for > ball_max_age_s (once one came)
-  torque_saturation  a joint's requested torque at its limit for > saturation_s
-                     (each joint's own run, as the driver-side tally counts it)
+  torque_saturation  a joint's commanded torque (after the watchdog's limits) at its
+                     limit for > saturation_s (each joint's own run, as the driver-side
+                     tally counts it)
   joint_limit        a joint within joint_margin_deg of the Panda's limit
   ee_speed           EE tip speed > ee_speed_max (m/s)
   workspace          EE tip outside [workspace_min, workspace_max] (m, base frame)
@@ -183,9 +184,8 @@ class SafetyMonitor:
             self._warn(t, "plan_rate", f"EE_PLAN at {plan_hz:.0f} Hz {over} (below "
                        f"{lim.plan_warn_rate_hz:.0f} Hz: the planner runs behind)")
 
-    def check_state(self, t: float, q, tip, tau_request, torque_limits=TAU_MAX) -> None:
-        """Joint margins (q (7) rad), EE tip speed and box (tip (6): m, m/s, base frame)
-        and torque saturation (tau_request (7) N m, the law's, at most its limits)."""
+    def check_state(self, t: float, q, tip) -> None:
+        """Joint margins (q (7) rad), EE tip speed and box (tip (6): m, m/s, base frame)."""
         if self.mode != "active":
             return
         # scalar Python on 7 values: numpy's per-call cost on arrays this small is most
@@ -209,9 +209,16 @@ class SafetyMonitor:
         if not all(a <= b <= c for a, b, c in zip(lo, (px, py, pz), hi)):
             return self.stop(t, "workspace", f"EE tip at [{px:.3f}, {py:.3f}, {pz:.3f}] m, "
                              f"outside the box {lo} .. {hi}")
+
+    def check_torque(self, t: float, tau, torque_limits=TAU_MAX) -> None:
+        """Saturation of the command about to be sent (tau (7) N m, at most its limits):
+        one joint at its limit for longer than saturation_s is a breach."""
+        if self.mode != "active":
+            return
+        lim = self.lim
         since, first = self._sat_since, None
-        for i, (tau, cap) in enumerate(zip(list(tau_request), list(torque_limits))):
-            if abs(tau) < cap * (1 - 1e-9):
+        for i, (a, cap) in enumerate(zip(list(tau), list(torque_limits))):
+            if abs(a) < cap * (1 - 1e-9):
                 since[i] = None
                 continue
             if since[i] is None:
@@ -224,7 +231,7 @@ class SafetyMonitor:
         self._peak("max_saturation_ms", 1e3 * held)
         if held > lim.saturation_s:
             self.stop(t, "torque_saturation", f"joint {first + 1} torque at "
-                      f"{tau_request[first]:+.1f} N m (limit {torque_limits[first]:g}) for "
+                      f"{tau[first]:+.1f} N m (limit {torque_limits[first]:g}) for "
                       f"{1e3 * held:.0f} ms (limit {1e3 * lim.saturation_s:.0f} ms)")
 
     # ------------------------------------------------------------ the stop

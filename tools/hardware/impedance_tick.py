@@ -148,13 +148,16 @@ class ImpedanceTick:
         else:
             tau = np.zeros(NQ)
             tip = self.law.tip_state(x)
-        self.safety.check_state(t, st.joint_position, tip, tau, self.law.gains.torque_limits)
-        if self.safety.mode != "active":
+        mon = self.safety
+        mon.check_state(t, st.joint_position, tip)
+        if mon.mode != "active":
             return None
         tau = self.watchdog.step(self.watchdog_state, t, StatusSample.from_lcm(st), tau)
         if self.watchdog_state.mode != "ok":
-            self.safety.stop(t, "watchdog", self.watchdog_state.first_fault or
-                             self.watchdog_state.mode)
+            mon.stop(t, "watchdog", self.watchdog_state.first_fault or self.watchdog_state.mode)
+            return None
+        mon.check_torque(t, tau, self.watchdog.config.torque_limits)
+        if mon.mode != "active":
             return None
         return torque_command_message(tau, st.utime)
 
