@@ -57,6 +57,9 @@ def test_overload_rows_count_unsafe_time_only_before_the_safe_stop():
     assert rows[0]["value"] == pytest.approx(0.2)
     assert rows[1]["value"] == "safe_stop" and "status_gap" in rows[1]["reason"]
     assert rows[2]["name"] == "bridge/overload/circles_90s"
+    r["processes"]["impedance"]["start_epoch_s"] = 983.0        # its own wall clock at t = 0
+    assert safe_stop(r)[1] == pytest.approx(995.0)
+    assert overload_rows(r, [])[0]["value"] == pytest.approx(0.2)   # the second episode after
     assert all("value" in row for row in rows)
 
 

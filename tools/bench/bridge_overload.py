@@ -83,16 +83,18 @@ def validity(r: dict, safety) -> list:
 
 def safe_stop(r: dict):
     """(breach text, its wall-clock time) of the impedance loop's safe stop, or None.
-    The time is when the loop's summary was read minus the loop's own time from the
-    breach to its end: late by the summary's way to this process, so the unsafe time
-    counted before it errs on the high side."""
+    The time is the loop's start_epoch_s + breach_t_s; without start_epoch_s, when the
+    loop's summary was read minus the loop's own time from the breach to its end (late
+    by the summary's way to this process, so the unsafe time before it errs high)."""
     imp = r["processes"].get("impedance", {})
     safety = imp.get("safety") or {}
     if safety.get("state") != "safe_stop":
         return None
     at = None
     read = r.get("read_at", {}).get("impedance")
-    if read is not None and imp.get("wall_s") is not None and safety.get("breach_t_s") is not None:
+    if safety.get("breach_t_s") is not None and imp.get("start_epoch_s") is not None:
+        at = float(imp["start_epoch_s"]) + float(safety["breach_t_s"])
+    elif read is not None and imp.get("wall_s") is not None and safety.get("breach_t_s") is not None:
         at = read - (float(imp["wall_s"]) - float(safety["breach_t_s"]))
     text = f"{safety.get('breach')}: {safety.get('breach_detail', '')}".strip(": ")
     return text, at
