@@ -22,8 +22,8 @@ from dataclasses import dataclass
 
 import numpy as np
 from pydrake.geometry import (AddCompliantHydroelasticProperties, AddContactMaterial,
-                              AddRigidHydroelasticProperties, HalfSpace, ProximityProperties,
-                              Sphere)
+                              AddRigidHydroelasticProperties, Box, HalfSpace,
+                              ProximityProperties, Sphere)
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
 from pydrake.multibody.tree import SpatialInertia, UnitInertia
@@ -84,8 +84,8 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
                              add_systems=None) -> RigidObjectPlant:
     """The box + table plant. time_step 0: continuous (for the linearizer); > 0: SAP.
     point_stiffness (N/m) and relaxation_time (s, SAP's dissipation) None: Drake's defaults.
-    hydroelastic_modulus (Pa): hydroelastic contact with compliant corner spheres against a
-    rigid table (None: point contact). add_systems(builder, plant, body), if given, adds
+    hydroelastic_modulus (Pa): hydroelastic contact of a compliant box (instead of the corner
+    spheres) against a rigid table (None: point contact). add_systems(builder, plant, body), if given, adds
     systems (e.g. force elements) to the diagram before it is built."""
     builder = DiagramBuilder()
     hydro = hydroelastic_modulus is not None
@@ -101,7 +101,6 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
         props.AddProperty("material", "relaxation_time", float(relaxation_time))
     table_props = ProximityProperties(props)
     if hydro:
-        AddCompliantHydroelasticProperties(params.corner_radius, float(hydroelastic_modulus), props)
         AddRigidHydroelasticProperties(table_props)
 
     unit = UnitInertia(*(np.asarray(params.inertia_diag) / params.mass))
@@ -111,7 +110,14 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     table = plant.RegisterCollisionGeometry(
         plant.world_body(), RigidTransform([0.0, 0.0, params.table_height]), HalfSpace(),
         "table", table_props)
-    for i, signs in enumerate(itertools.product((-1.0, 1.0), repeat=3)):
+    if hydro:   # a compliant box carries the contact (no corner spheres)
+        box_props = ProximityProperties(props)
+        AddCompliantHydroelasticProperties(0.5 * min(params.half_size),
+                                           float(hydroelastic_modulus), box_props)
+        plant.RegisterCollisionGeometry(body, RigidTransform(),
+                                        Box(*(2.0 * np.asarray(params.half_size))), "box",
+                                        box_props)
+    for i, signs in enumerate(itertools.product((-1.0, 1.0), repeat=3) if not hydro else []):
         centre = np.asarray(signs) * (np.asarray(params.half_size) - r)
         corner = plant.RegisterCollisionGeometry(body, RigidTransform(centre), Sphere(r),
                                                  f"corner{i}", props)

@@ -50,9 +50,9 @@ class DrakeBaseline:
     --model drake`, `diagnose --model drake`), geometry, mass and inertia from `body`,
     `contact` and the geometry/inertia keys of `patch`."""
     time_step: float = 0.0           # s; 0 = the recording's step / 4
-    contact_model: str = "point"     # "point" or "hydroelastic" (compliant corner spheres)
+    contact_model: str = "point"     # "point" (corner spheres) or "hydroelastic" (a compliant box)
     point_stiffness: float = 0.0     # N/m; 0 = Drake's default
-    hydroelastic_modulus: float = 1.0e7   # Pa, the corner spheres' (contact_model hydroelastic)
+    hydroelastic_modulus: float = 1.0e7   # Pa, the box (contact_model hydroelastic)
     relaxation_time: float = 0.0     # s, SAP's dissipation time scale; 0 = Drake's default
     friction: float = -1.0           # < 0 = contact.friction (SAP uses one coefficient)
     viscous_drag: float = 0.0        # N s/m, force -c v on the body's centre (world)

@@ -138,3 +138,14 @@ def test_real_tosses_diagnosed_drake_beats_drake_default():
     c = r["comparisons"]["ballistic"]
     assert c["drake_default_to_diagnosed"]["median_difference"]["ci95"][0] > 0
     assert c["lcs_nominal_to_diagnosed"]["median_difference"]["ci95"][0] > 0
+
+
+def test_hydroelastic_box_rests_on_its_face():
+    """contact_model hydroelastic: a compliant box (no corner spheres) on the rigid table."""
+    sim = DrakeRigidSimulator(with_drake(RigidObjectScenario(), contact_model="hydroelastic"), DT)
+    assert sim.plant.num_collision_geometries() == 2          # the table and the box
+    x0 = np.zeros(13)
+    x0[2], x0[3] = 0.0524 + 0.02, 1.0
+    X = sim.rollout(x0, 120)
+    assert X[-1, 2] == pytest.approx(0.0524, abs=1e-3)
+    assert np.linalg.norm(X[-1, 7:10]) < 0.05

@@ -9,7 +9,7 @@ The plant is models/rigid_object.py's, discrete with SAP:
   r_comp, torsional_friction have no counterpart here);
 - contact: drake.contact_model, `point` (stiffness drake.point_stiffness N/m given to every
   geometry - Drake combines a pair's in series, so a corner-table pair gets half of it -,
-  0 = Drake's default) or `hydroelastic` (compliant corner spheres of modulus
+  0 = Drake's default) or `hydroelastic` (a compliant box of modulus
   drake.hydroelastic_modulus Pa against a rigid table);
 - friction: drake.friction, < 0 = contact.friction (SAP uses one coefficient: the dynamic
   one; a static coefficient would be ignored, so there is one knob);
