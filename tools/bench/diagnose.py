@@ -9,6 +9,11 @@ Rows
                                    same run (full only): every fold / jackknife / half-horizon
                                    refit by Levenberg-Marquardt, tolerances 1e-10 / 1e-9.
                                    The first row carries baseline/speedup against it.
+  diagnose/cube/lcs/24tosses       `diagnose_rigid` of 24 synthetic cube tosses (40 steps,
+  diagnose/cube/drake/24tosses     made by the drake backend with mu 0.3; not timed), fit on
+                                   10, effects friction and table_offset, 2 workers, with the
+                                   lcs and the drake backend; the drake row carries
+                                   baseline/speedup against the lcs row.
 """
 from __future__ import annotations
 
@@ -54,6 +59,25 @@ def run_bench(quick: bool = False) -> list[dict]:
         rows.append({"name": "diagnose/ball/15ep/exact_refits", "median_ms": s_wall * 1e3,
                      "wall_s": s_wall, "diagnose_s": s_diag, "selected": s_sel})
         row.update(baseline=rows[1]["name"], speedup=s_wall / wall)
+    return rows + _rigid_rows()
+
+
+def _rigid_rows() -> list[dict]:
+    """One rigid-object diagnosis per model backend on the same synthetic tosses."""
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.concealed_rigid_data import concealed_tosses
+    from adaptive_c3.tools.diagnosis.rigid_diagnose import diagnose_rigid
+    scenario, _ = load_scenario(SCENARIO_DIR / "cube_toss.yaml")
+    rec = concealed_tosses(scenario, episodes=24, steps=40, seed=5, friction=0.3)
+    rows = []
+    for model in ("lcs", "drake"):
+        t0 = time.perf_counter()
+        r = diagnose_rigid(rec, scenario, max_fit_episodes=10, workers=2, progress=False,
+                           effects=("friction", "table_offset"), model=model)
+        wall = time.perf_counter() - t0
+        rows.append({"name": f"diagnose/cube/{model}/24tosses", "median_ms": wall * 1e3,
+                     "wall_s": wall, "selected": ",".join(s["name"] for s in r["selected"])})
+    rows[1].update(baseline=rows[0]["name"], speedup=rows[0]["wall_s"] / rows[1]["wall_s"])
     return rows
 
 
