@@ -15,6 +15,7 @@ def _run(**over):
     r = {"status_rate_hz": 998.0, "plan_rate_hz": 200.0, "duration_s": 90.0,
          "overload": 2, "realtime": False, "circle_turns": 0.4,
          "command_period_ms": {"p50": 1.0, "p99": 3.0, "max": 9.0},
+         "planner_latency_ms": {"p50": 2.7, "p99": 12.0},
          "exit_codes": {"planner": 0, "impedance": 0, "sim-driver": 0},
          "read_at": {"impedance": 1000.0},
          "processes": {"sim-driver": {"scheduling": "SCHED_FIFO 80", "unsafe_s": 0.5,
@@ -22,7 +23,10 @@ def _run(**over):
                                       "unsafe_episodes": [[990.0, 990.2, 0.2, ["joint_near_limit"]],
                                                           [995.0, 995.3, 0.3, ["ball_off_table"]]]},
                        "impedance": {"scheduling": "SCHED_FIFO 70", "wall_s": 20.0,
-                                     "safety": {"state": "ok"}},
+                                     "safety": {"state": "ok", "min_status_rate_hz": 995.0,
+                                                 "min_plan_rate_hz": 195.0,
+                                                 "warnings": {"status_rate": 0, "plan_rate": 0},
+                                                 "max_plan_age_ms": 6.0}},
                        "planner": {}}}
     r.update(over)
     return r
@@ -40,6 +44,34 @@ def test_validity_names_each_broken_timing_assumption():
     reasons = validity(r, _safety())
     assert len(reasons) == 3
     assert "420 Hz" in reasons[0] and "impedance" in reasons[1] and "EE_PLAN at 44" in reasons[2]
+
+
+def test_validity_uses_the_impedance_loops_own_windows_and_the_planner_latency():
+    # the no-overload run of 2026-11-26 08:53 (runs/bridge/three_processes.json): the whole
+    # run's averages held (status 1000 Hz, EE_PLAN 200 Hz, SCHED_FIFO) and it was marked
+    # valid, but the loop's own 200 ms windows fell to 604 Hz status and 0 plans, a plan
+    # was 259 ms old when used, and it safe-stopped at 4.9 s
+    r = _run()
+    r["processes"]["impedance"]["safety"] = {
+        "state": "safe_stop", "min_status_rate_hz": 603.7, "min_plan_rate_hz": 0.0,
+        "warnings": {"status_rate": 12, "plan_rate": 22}, "max_plan_age_ms": 258.9}
+    reasons = validity(r, _safety())
+    assert len(reasons) == 3
+    assert "604 Hz" in reasons[0] and "12 status_rate warnings" in reasons[0]
+    assert "EE_PLAN down to 0 Hz" in reasons[1] and "22 plan_rate" in reasons[1]
+    assert "259 ms old" in reasons[2]
+    # warnings alone (a window just under the rate between the minima's updates) count
+    r["processes"]["impedance"]["safety"] = {**_run()["processes"]["impedance"]["safety"],
+                                             "warnings": {"status_rate": 1, "plan_rate": 0}}
+    assert ["1 status_rate warnings" in x for x in validity(r, _safety())] == [True]
+    # the planner latency p99 beyond what the controller was shown to tolerate
+    from adaptive_c3.tools.bench.bridge_overload import PLANNER_LATENCY_P99_MAX_MS
+    r = _run(planner_latency_ms={"p50": 3.0, "p99": PLANNER_LATENCY_P99_MAX_MS + 30})
+    assert ["planner latency p99" in x for x in validity(r, _safety())] == [True]
+    # no summary from the loop (it crashed): not a valid run
+    r = _run()
+    del r["processes"]["impedance"]["safety"]
+    assert validity(r, _safety()) == ["the impedance loop wrote no safety summary"]
 
 
 def test_overload_rows_count_unsafe_time_only_before_the_safe_stop():

@@ -42,6 +42,7 @@ from adaptive_c3.tools.hardware.plan_hold import PlanHold
 from adaptive_c3.tools.hardware.torque_command_sender import torque_command_message
 
 NQ = 7
+PLAN_HOLD_S = 0.1       # s: a plan older than this is held at rest (PlanHold)
 
 
 def usable_status(msg) -> bool:
@@ -57,7 +58,7 @@ def usable_status(msg) -> bool:
 
 class ImpedanceTick:
     def __init__(self, s, *, stale_s: float = 0.05, rate_limit: float = 1000.0,
-                 plan_hold_s: float = 0.1, say=None):
+                 plan_hold_s: float = PLAN_HOLD_S, say=None):
         from drake import lcmt_panda_status
 
         from adaptive_c3.diagrams.ball_rolling import make_impedance_law
