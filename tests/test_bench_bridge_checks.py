@@ -16,6 +16,7 @@ def _run(**over):
          "overload": 2, "realtime": False, "circle_turns": 0.4,
          "command_period_ms": {"p50": 1.0, "p99": 3.0, "max": 9.0},
          "planner_latency_ms": {"p50": 2.7, "p99": 12.0},
+         "status_to_command_ms": {"p50": 0.4, "p99": 1.5},
          "exit_codes": {"planner": 0, "impedance": 0, "sim-driver": 0},
          "read_at": {"impedance": 1000.0},
          "processes": {"sim-driver": {"scheduling": "SCHED_FIFO 80", "unsafe_s": 0.5,
@@ -68,6 +69,9 @@ def test_validity_uses_the_impedance_loops_own_windows_and_the_planner_latency()
     from adaptive_c3.tools.bench.bridge_overload import PLANNER_LATENCY_P99_MAX_MS
     r = _run(planner_latency_ms={"p50": 3.0, "p99": PLANNER_LATENCY_P99_MAX_MS + 30})
     assert ["planner latency p99" in x for x in validity(r, _safety())] == [True]
+    # status -> command p99 beyond the wrist's delay margin (that run's was 6.1 ms)
+    r = _run(status_to_command_ms={"p50": 0.5, "p99": 6.1})
+    assert ["status -> command p99 6.1 ms" in x for x in validity(r, _safety())] == [True]
     # no summary from the loop (it crashed): not a valid run
     r = _run()
     del r["processes"]["impedance"]["safety"]
