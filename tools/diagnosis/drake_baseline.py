@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator  # noqa: F401
+from adaptive_c3.tools.diagnosis.model_backend import mean_position_error_pct
 
 KNOBS = ("friction", "point_stiffness", "relaxation_time")
 # search ranges of the knobs (schema units), searched on a log scale
@@ -24,12 +25,6 @@ MAX_TUNE_EPISODES = 40
 
 
 # ---------------------------------------------------------------------- tuning
-def mean_position_error_pct(x_hat: np.ndarray, x: np.ndarray, size: float) -> float:
-    """Mean over time of |p_hat - p| as % of the object's size (evaluate's
-    position_pct_mean)."""
-    return float(np.mean(np.linalg.norm(x_hat[:, 0:3] - x[:, 0:3], axis=1)) / size * 100.0)
-
-
 def score_episodes(sim: DrakeRigidSimulator, episodes) -> float:
     """Median over episodes of the mean-over-time position error (% of size)."""
     return float(np.median([mean_position_error_pct(sim.rollout(x[0], len(x) - 1), x, sim.size)

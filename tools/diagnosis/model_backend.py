@@ -50,7 +50,7 @@ def make_model(name: str, scenario, dt: float):
     return DrakeRigidSimulator(scenario, dt)
 
 
-def _position_error_pct(x_hat: np.ndarray, x: np.ndarray, size: float) -> float:
+def mean_position_error_pct(x_hat: np.ndarray, x: np.ndarray, size: float) -> float:
     """Mean over time of |p_hat - p| as % of size (evaluate's position_pct_mean)."""
     return float(np.mean(np.linalg.norm(x_hat[:, 0:3] - x[:, 0:3], axis=1)) / size * 100.0)
 
@@ -65,7 +65,7 @@ def _job(job):
         try:
             with np.errstate(all="ignore"):
                 x_hat = model.rollout(x0, len(x) - 1)
-            score = _position_error_pct(x_hat, x, size)
+            score = mean_position_error_pct(x_hat, x, size)
             ok = np.isfinite(score)
         except (ValueError, RuntimeError, np.linalg.LinAlgError):
             x_hat, ok = None, False
