@@ -1,6 +1,7 @@
 """What the ball model's held-out error is made of when nothing is concealed.
 
     python -m adaptive_c3.tools.diagnosis.ball_floor [DRAWS] [FIRST_SEED] [--out DIR]
+        [--no-open-pair-gate]
 
 The rigid 100 Hz Anitescu LCS that `diagnose` patches is compared with the other
 engine's states (SAP, compliant point contact, 1 kHz: concealed_ball_data) on clean
@@ -34,8 +35,9 @@ WORST = 0.05          # the share of windows called the worst
 CONTACT_CHANGE = (2e-4, 5e-4)
 
 
-def floor_of_draw(seed: int, episodes: int = 15) -> dict:
-    """The model's mismatch on one clean draw (module doc)."""
+def floor_of_draw(seed: int, episodes: int = 15, gate: bool = True) -> dict:
+    """The model's mismatch on one clean draw (module doc); gate=False: without the
+    open-pair gate (BallSpec.open_pair_tol = None, the model before issue 30)."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
     from adaptive_c3.tools.diagnosis.concealed_ball_data import (NOISE_STD, concealed_draw,
                                                                  draw_variation)
@@ -49,6 +51,8 @@ def floor_of_draw(seed: int, episodes: int = 15) -> dict:
     rec, _, _ = concealed_draw(seed, name="none", variation=var, noise_scale=1e-3,
                                episodes=episodes, params=ModelParams.from_scenario(scenario))
     spec = ball_spec(scenario)
+    if not gate:
+        spec.open_pair_tol = None
     spec.prepare(rec)
     W = make_windows(rec, HORIZON)
     X, _ = rollout(patch(spec, []), W.X0, W.U, HORIZON, LAG, W.row)
@@ -102,13 +106,15 @@ def main(argv=None) -> int:
     ap.add_argument("draws", type=int, nargs="?", default=10)
     ap.add_argument("first_seed", type=int, nargs="?", default=200)
     ap.add_argument("--out", default="runs/ball_floor")
+    ap.add_argument("--no-open-pair-gate", action="store_true",
+                    help="the model before issue 30 (relaxed cone on open pairs too)")
     args = ap.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     bar = Progress(args.draws, "ball_floor", unit="draws")
     for i, seed in enumerate(range(args.first_seed, args.first_seed + args.draws)):
-        rows.append(floor_of_draw(seed))
+        rows.append(floor_of_draw(seed, gate=not args.no_open_pair_gate))
         bar.update(i + 1)
     bar.close()
     summary = dict(draws=len(rows),
