@@ -250,14 +250,22 @@ def test_calibration_offset_is_a_nuisance_only_and_folds_into_a_selected_offset(
     assert _params(mu, spec, shift)[0]["params"][0]["value"] == 0.5
 
 
-@pytest.mark.parametrize("seed, effect, calibration_kept", [
-    (8019, "friction_coefficient", True),     # table off by -0.29 mm: kept, friction named
-    (8026, "contact_offset", False),          # a 2.3 mm EE-ball offset is not calibration
+@pytest.mark.parametrize("seed, effect, calibration_kept, named", [
+    # table off by -0.29 mm: kept. EE-ball mu 0.197 was named first (cut 31.5 %) by the
+    # relaxed cone's open-pair reach; with the open-pair gate (issue 30) its cut is
+    # 0.5-1.7 % and the verdict is ambiguous (none, EE-ball friction, mass): the truth
+    # stays in the set, the pushes of this draw do not show the low mu otherwise
+    (8019, "friction_coefficient", True, False),
+    (8026, "contact_offset", False, True),    # a 2.3 mm EE-ball offset is not calibration
 ])
-def test_calibration_nuisance_on_concealed_draws(seed, effect, calibration_kept):
+def test_calibration_nuisance_on_concealed_draws(seed, effect, calibration_kept, named):
     from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
     r = score_draw(seed, baseline=False)
-    assert r["truth"]["name"] == effect and r["named"], r["selected"]
+    assert r["truth"]["name"] == effect
+    if named:
+        assert r["named"], r["selected"]
+    else:
+        assert r["verdict"] == "ambiguous" and r["in_ambiguous_set"], r["selected"]
     kept = [n for n in r["nuisance"] if n["name"].startswith("calibration_offset")]
     assert bool(kept) is calibration_kept, r["nuisance"]
     assert all(abs(n["values"][0]) < 1e-3 for n in kept)
