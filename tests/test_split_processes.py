@@ -156,6 +156,17 @@ def test_plan_encoder_delay_holds_each_plan_back():
     assert len(lags) > 25 and set(lags) <= {10.0, 11.0}
 
 
+def test_planner_delay_sends_no_empty_plan_to_the_impedance_loop():
+    """Regression: with `planner --delay-ms 60` the planner published the encoder's empty
+    message (num_joints = 0) at 200 Hz until its first plan was 60 ms old; the
+    impedance loop's safety layer counts each as a malformed EE_PLAN and safe-stopped
+    at t = 0.045 s (ten in a row), so the lock-step latency study could not run."""
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"), FAST)
+    out = run_split_loopback(s, 0.15, delay_s=0.06)
+    assert out["safety"]["malformed"] == {} and out["safety"]["breach"] is None
+    assert out["safety"]["state"] == "active" and out["plans_used"] > 10
+
+
 def _ee_tip(q):
     from adaptive_c3.systems.franka.impedance_controller import ArmModel
     arm = ArmModel()

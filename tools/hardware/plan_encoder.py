@@ -5,7 +5,12 @@ input  "ee.feedforward_force" (3) N, at the tip, base frame
 input  "lcmt_panda_status"    abstract: the latest PANDA_STATUS (its utime stamps the plan)
 output "lcmt_robot_state"     abstract: the EE_PLAN message
 delay_s > 0 (`planner --delay-ms`) holds every plan back by that long before it is sent:
-an injected planner latency, in the diagram's clock (plans are sampled every period).
+an injected planner latency, in the diagram's clock (plans are sampled every period);
+until the first plan is that old the output is an empty message (num_joints = 0).
+lcm (a DrakeLcm) and publish_period (s): the encoder publishes EE_PLAN itself every
+publish_period, and only a plan: an empty message would be a malformed EE_PLAN to the
+impedance loop, whose safety layer stops after safety.malformed_run of them in a row
+(`--delay-ms 50` sent ten at 200 Hz: a safe stop at t = 0.045 s).
 """
 from __future__ import annotations
 
@@ -17,7 +22,8 @@ from adaptive_c3.tools.hardware.lcm_channels import encode_plan
 
 
 class PlanEncoder(LeafSystem):
-    def __init__(self, delay_s: float = 0.0, period: float = 1e-3):
+    def __init__(self, delay_s: float = 0.0, period: float = 1e-3, *, lcm=None,
+                 publish_period: float | None = None):
         super().__init__()
         self._delay = float(delay_s)
         from drake import lcmt_panda_status, lcmt_robot_state
@@ -32,6 +38,15 @@ class PlanEncoder(LeafSystem):
         self.DeclareAbstractOutputPort("lcmt_robot_state",
                                        lambda: AbstractValue.Make(lcmt_robot_state()),
                                        self._calc)
+        self._lcm = lcm
+        if lcm is not None:
+            self.DeclarePeriodicPublishEvent(publish_period, 0.0, self._publish)
+
+    def _publish(self, context):
+        from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL
+        msg = self.get_output_port().Eval(context)
+        if msg.num_joints:                           # a plan, not the empty message
+            self._lcm.Publish(PLAN_CHANNEL, msg.encode())
 
     def _plan_now(self, context):
         return (int(self._status.Eval(context).utime),

@@ -63,13 +63,9 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
                           delay_s: float = 0.0, transport_s: float = 1e-3) -> PlannerProcess:
     """delay_s: an injected latency on every plan (`--delay-ms`); transport_s: the rest of
     the way to the impedance loop (LCM), for c3.predict_state's measured lead."""
-    from drake import lcmt_robot_state
-    from pydrake.systems.lcm import LcmPublisherSystem
-
     from adaptive_c3.diagrams.ball_rolling import make_gait, make_impedance_controller
     from adaptive_c3.tools.hardware.controller_pieces import (add_ball_input, add_lcm,
                                                               add_planner, add_status_input)
-    from adaptive_c3.tools.hardware.lcm_channels import PLAN_CHANNEL
     from adaptive_c3.tools.hardware.plan_encoder import PlanEncoder
     # C3's warm start moves by the time between plans (the diagram clock follows the
     # wall clock here), not by one LCS step per solve
@@ -83,13 +79,12 @@ def build_planner_process(s, lcm, *, plan_period: float = 0.005, ball_period: fl
     builder.Connect(status.arm_state, kin.GetInputPort("panda.state"))
     ball = add_ball_input(builder, lcm, s, period=ball_period)
     c = add_planner(builder, s, kin, ball, transport_s=delay_s + transport_s)
-    enc = builder.AddSystem(PlanEncoder(delay_s))
+    # (the encoder publishes EE_PLAN itself: never the empty message --delay-ms has
+    # before its first plan is old enough)
+    enc = builder.AddSystem(PlanEncoder(delay_s, lcm=lcm, publish_period=plan_period))
     builder.Connect(c.ee_desired_state, enc.GetInputPort("ee.desired_state"))
     builder.Connect(c.ee_feedforward_force, enc.GetInputPort("ee.feedforward_force"))
     builder.Connect(status.status, enc.GetInputPort("lcmt_panda_status"))
-    pub = builder.AddSystem(LcmPublisherSystem.Make(PLAN_CHANNEL, lcmt_robot_state, lcm,
-                                                    plan_period))
-    builder.Connect(enc.get_output_port(), pub.get_input_port())
     diagram = builder.Build()
     diagram.set_name(f"planner[{s.name}]")
     # (make_gait: the schedule the planner's gait keeps)
