@@ -68,9 +68,10 @@ class Spinners:
 
 
 # p99 of EE_PLAN's age on arrival (status utime -> plan received) that the controller
-# tolerates: in lock-step (latency_table / planner --delay-ms) the ball still rolls at
-# 50 ms of injected latency (1.06 turns in 30 s, 1.21 at 0 ms); beyond the bound the
-# figures were not measured, so a run above it is not one whose timing was checked
+# tolerates. Lock-step, 30 s, every plan held back d ms (planner --delay-ms): circle turns
+# 1.21 / 1.06 / 0.91 at d = 0 / 50 / 75 ms (3.6 / 3.2 / 2.7 per 90 s; the wrist's
+# longest saturation 13 ms at 75), and at 100 ms the impedance loop never starts (no
+# plan within its 100 ms plan hold). 50 ms keeps the >= 3 turns per 90 s
 PLANNER_LATENCY_P99_MAX_MS = 50.0
 # p99 of a command's age on arrival (status utime -> PANDA_COMMAND on the wire) that the
 # 1 kHz loop tolerates. The wrist's rotational impedance (900 N m/rad, 20 N m s/rad on
