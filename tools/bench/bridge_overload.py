@@ -69,7 +69,7 @@ class Spinners:
 
 # p99 of EE_PLAN's age on arrival (status utime -> plan received) that the controller
 # tolerates. Lock-step, 30 s, every plan held back d ms (planner --delay-ms): circle turns
-# 1.21 / 1.06 / 0.91 at d = 0 / 50 / 75 ms (3.6 / 3.2 / 2.7 per 90 s; the wrist's
+# 1.22 / 1.06 / 0.91 at d = 0 / 50 / 75 ms (3.7 / 3.2 / 2.7 per 90 s; the wrist's
 # longest saturation 13 ms at 75), and at 100 ms the impedance loop never starts (no
 # plan within its 100 ms plan hold). 50 ms keeps the >= 3 turns per 90 s
 PLANNER_LATENCY_P99_MAX_MS = 50.0
