@@ -167,6 +167,28 @@ def test_planner_delay_sends_no_empty_plan_to_the_impedance_loop():
     assert out["safety"]["state"] == "active" and out["plans_used"] > 10
 
 
+def test_late_statuses_reach_the_loop_delay_later():
+    """split_loopback's status_delay_s (latency_table --loop-delays-ms): each status is
+    handed to the impedance tick delay_s of loop time after it arrived, in order."""
+    from adaptive_c3.tools.hardware.split_loopback import LateStatuses
+
+    class Tick:
+        def __init__(self):
+            self.got = []
+
+        def receive_status(self, msg):
+            self.got.append(msg)
+    tick = Tick()
+    late = LateStatuses(tick, 0.003)
+    handed = {}
+    for k in range(10):
+        late.t = 1e-3 * k
+        tick.receive_status(k)              # (the LCM callback: now late.arrive)
+        late.release(1e-3 * k)
+        handed[k] = list(tick.got)
+    assert handed[2] == [] and handed[3] == [0] and handed[9] == [0, 1, 2, 3, 4, 5, 6]
+
+
 def _ee_tip(q):
     from adaptive_c3.systems.franka.impedance_controller import ArmModel
     arm = ArmModel()
