@@ -76,11 +76,12 @@ PLANNER_LATENCY_P99_MAX_MS = 50.0
 # p99 of a command's age on arrival (status utime -> PANDA_COMMAND on the wire) that the
 # 1 kHz loop tolerates. The wrist's rotational impedance (900 N m/rad, 20 N m s/rad on
 # ~0.21 kg m2 with the motors' reflected inertia) behind the driver's 30 Hz torque filter
-# has little delay margin: in lock-step with the loop answering each status a constant d
-# later, joint 7's longest saturation was 8, 3, 9, 30 ms at d = 0, 2, 3, 4 ms and a safe
-# stop (joint 7 at 12 N m for 50 ms, the wrist oscillating at ~10 Hz) at 1.2 s for 5 ms,
-# 0.6 s for 10 ms. Wall-clock runs agree: p99 3.4 ms rolled for 20 s; 5.8, 6.1 and
-# 14.4 ms saturated the wrist at 7.6, 4.9 and 1.5 s
+# has little delay margin. Lock-step, 6 s, the loop answering each status d ms late
+# (`python -m adaptive_c3.tools.studies.latency_table --loop-delays-ms 0,2,3,4,5,10
+# --duration 6`): joint 7's longest saturation 1, 3, 9, 30 ms at d = 0, 2, 3, 4 ms; a
+# safe stop (joint 7 at 12 N m for 50 ms, the wrist oscillating at ~10 Hz) at 1.24 s for
+# 5 ms and 0.59 s for 10 ms. Wall-clock runs agree: p99 3.4 ms rolled for 20 s; 5.8,
+# 6.1 and 14.4 ms saturated the wrist at 7.6, 4.9 and 1.5 s
 STATUS_TO_COMMAND_P99_MAX_MS = 3.0
 
 
