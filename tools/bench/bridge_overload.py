@@ -79,7 +79,7 @@ PLANNER_LATENCY_P99_MAX_MS = 50.0
 # has little delay margin. Lock-step, 6 s, the loop answering each status d ms late
 # (`python -m adaptive_c3.tools.studies.latency_table --loop-delays-ms 0,2,3,4,5,10
 # --duration 6`): joint 7's longest saturation 1, 3, 9, 30 ms at d = 0, 2, 3, 4 ms; a
-# safe stop (joint 7 at 12 N m for 50 ms, the wrist oscillating at ~10 Hz) at 1.24 s for
+# safe stop (joint 7 at 12 N m for 50 ms; the wrist in a growing 7-10 Hz swing) at 1.24 s for
 # 5 ms and 0.59 s for 10 ms. Wall-clock runs agree: p99 3.4 ms rolled for 20 s; 5.8,
 # 6.1 and 14.4 ms saturated the wrist at 7.6, 4.9 and 1.5 s
 STATUS_TO_COMMAND_P99_MAX_MS = 3.0
