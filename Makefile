@@ -19,7 +19,7 @@ run: install
 	@echo "figures and summary: runs/default/"
 
 test: install
-	$(BIN)/pytest -q
+	$(BIN)/pytest -q --durations=15
 
 test-slow: install
 	$(BIN)/pytest -q -m slow
