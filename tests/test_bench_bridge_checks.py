@@ -72,6 +72,16 @@ def test_validity_uses_the_impedance_loops_own_windows_and_the_planner_latency()
     # status -> command p99 beyond the wrist's delay margin (that run's was 6.1 ms)
     r = _run(status_to_command_ms={"p50": 0.5, "p99": 6.1})
     assert ["status -> command p99 6.1 ms" in x for x in validity(r, _safety())] == [True]
+    # a safe stop on the machine's timing (09:43 run: the driver's start-up stall) is
+    # named; one on the arm's state is the run's outcome, not its validity
+    r = _run()
+    r["processes"]["impedance"]["safety"] = {
+        "state": "safe_stop", "breach": "status_stale", "min_status_rate_hz": None,
+        "breach_detail": "no PANDA_STATUS for 50.1 ms (limit 50 ms)"}
+    assert validity(r, _safety()) == ["impedance loop safe-stopped on timing: status_stale: "
+                                      "no PANDA_STATUS for 50.1 ms (limit 50 ms)"]
+    r["processes"]["impedance"]["safety"].update(breach="torque_saturation")
+    assert validity(r, _safety()) == []
     # no summary from the loop (it crashed): not a valid run
     r = _run()
     del r["processes"]["impedance"]["safety"]

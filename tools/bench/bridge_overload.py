@@ -89,10 +89,10 @@ def validity(r: dict, safety) -> list:
     """The reasons the run `r` (run_three_processes) is not valid (empty: valid).
     safety: the scenario's SafetyLimits (the rates). Checked: the whole run's status and
     plan rates on the wire; the driver and the impedance loop under SCHED_FIFO; what the
-    impedance loop itself saw in its 200 ms windows (its summary's `safety`: the lowest
-    status and plan rate, its rate warnings, the oldest plan it held - beyond the plan
-    hold the arm is held at rest, not driven by the plan); the status -> command and
-    the planner latency p99."""
+    impedance loop itself saw (its summary's `safety`: a timing breach; in its 200 ms
+    windows the lowest status and plan rate and its rate warnings; the oldest plan it
+    held - beyond the plan hold the arm is held at rest, not driven by the plan); the
+    status -> command and the planner latency p99."""
     from adaptive_c3.tools.hardware.impedance_tick import PLAN_HOLD_S
     reasons = []
     if r["status_rate_hz"] < safety.status_warn_rate_hz:
@@ -121,11 +121,19 @@ def _ms(x, digits: int = 0) -> str:
     return "unknown" if x is None else f"{x:.{digits}f} ms"
 
 
+# the safety layer's breaches that are the machine's timing, not the arm's state
+TIMING_BREACHES = ("status_stale", "loop_stall", "status_gap", "status_rate", "plan_stale",
+                   "ball_stale")
+
+
 def _loop_view(ls, safety, hold_ms: float) -> list:
     """Reasons from the impedance loop's own summary `safety` block (None: it wrote none)."""
     if not ls:
         return ["the impedance loop wrote no safety summary"]
     out = []
+    if ls.get("breach") in TIMING_BREACHES:
+        out.append(f"impedance loop safe-stopped on timing: {ls['breach']}: "
+                   f"{ls.get('breach_detail')}")
     warns = ls.get("warnings") or {}
     for key, kind, floor, what in (
             ("min_status_rate_hz", "status_rate", safety.status_warn_rate_hz, "PANDA_STATUS"),
