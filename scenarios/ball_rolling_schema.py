@@ -110,7 +110,7 @@ class CameraConfig:
                                      # position_noise_m of noise (default 0: noise-free)
     rate_hz: float = 80.0
     width: int = 160                 # px; 320 x 240 until issue 18: the render cost twice
-    height: int = 120                # as much, the estimate 0.3 mm (mean) closer (README)
+    height: int = 120                # as much, the estimate 0.3 mm (mean) closer (docs/performance.md)
     position_noise_m: float = 0.0    # extra noise on the estimate (camera off only)
     filter_alpha: float = 0.5        # low-pass weight of the newest measurement
 

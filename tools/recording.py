@@ -1,6 +1,6 @@
 """Recordings (.npz): the file format runs write and `diagnose` reads.
 
-Keys (the recording format; README): t [T] s; x [T, n]; u [T, m]; state_names [n];
+Keys (the recording format; docs/diagnosis.md): t [T] s; x [T, n]; u [T, m]; state_names [n];
 input_names [m]; optional scenario (YAML text), episode [T] integer ids, and
 any extra arrays a run wants to keep (lambda, r_comp, ...).
 """

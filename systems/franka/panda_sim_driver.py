@@ -1,7 +1,7 @@
 """Simulated Franka torque driver: adds gravity compensation to the torque command.
 
 A real Franka in torque mode adds its own gravity compensation to the user's command;
-this system plays that role in simulation (README, Hardware over LCM), so that
+this system plays that role in simulation (docs/hardware.md), so that
 "panda.torque_command" means the same in simulation, over LCM and on the robot.
 
 Ports:

@@ -1,6 +1,6 @@
 """Benchmark: our Lemke LCP solver against Drake's MobyLcpSolver.
 
-Rows (README, Measured): `lcp/m{m}/lemke` with `baseline`, `speedup`,
+Rows (docs/performance.md): `lcp/m{m}/lemke` with `baseline`, `speedup`,
 `solved_fraction`, `max_abs_diff_z`; and `lcp/m{m}/moby`. The Moby timing is a
 whole call as a user with a new (M, q) each step makes it: build a
 MathematicalProgram, add the complementarity constraint, Solve. The Moby row

@@ -10,7 +10,7 @@ the loop still ticks every tick_s of wall clock, so the safety layer sees the si
 Nothing here waits for C3 or the learner: they run in the planner process. No Drake
 diagram either: a Simulator tick of the same law cost ~0.5 ms of CPU, half of it
 framework, which two cores shared with the driver and the planner could not always give
-within 1 ms (README, Hardware over LCM).
+within 1 ms (docs/hardware.md).
 
 A message that does not decode, or does not fit its layout, is counted and never used
 (a run of them is a safe stop). The run ends on a safe stop (exit code 3, the summary's

@@ -24,7 +24,7 @@ built on a status that went stale carries that age, so the driver drops it after
 Every piece is a shared core: ImpedanceLaw (also inside the simulation's
 ImpedanceController), WatchdogCore (PandaWatchdog), torque_command_message
 (TorqueCommandSender). Without the framework a tick costs the law's kinematics and
-little else: ~0.1 ms, against ~0.5 ms as a Simulator tick (README, Hardware over LCM).
+little else: ~0.1 ms, against ~0.5 ms as a Simulator tick (docs/hardware.md).
 """
 from __future__ import annotations
 
