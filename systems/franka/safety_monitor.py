@@ -43,8 +43,9 @@ import sys
 import numpy as np
 
 from adaptive_c3.models.panda_kinematics import Q_MAX, Q_MIN, TAU_MAX
+from adaptive_c3.systems.franka.franka_driver_rules import DAMPING
 
-DRIVER_KD = np.array([37.5, 50.0, 37.5, 25.0, 5.0, 3.75, 2.5])   # N m s/rad (the driver's)
+DRIVER_KD = DAMPING            # N m s/rad: the driver's own joint damping
 SAFE_STOP_EXIT = 3      # exit code of a process that ended in a safe stop
 END_GRACE_S = 1.0       # statuses that stop this close to end_t: the driver's run ended
 
