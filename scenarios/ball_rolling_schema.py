@@ -142,6 +142,27 @@ class SafetyLimits:
 
 
 @dc.dataclass
+class DrakeWorld:
+    """The world `diagnose --model drake` replays ball-rolling recordings through: Drake's
+    MultibodyPlant with SAP and point contact (EE tip sphere driven by the recorded EE
+    force, ball, table). `run` does not read it. 0 (or -1 for friction) = the `model`
+    section's value; what a drake diagnosis finds is written here."""
+    time_step: float = 0.0           # s, SAP step; 0 = the recording's step / 4
+    point_stiffness: float = 1.0e5   # N/m, every geometry (a pair: half, in series)
+    relaxation_time: float = 2.0e-3  # s, SAP's dissipation time scale, every geometry
+    friction: List[float] = dc.field(default_factory=lambda: [-1.0, -1.0])  # mu of
+                                     # [ee_ball, ball_table]; < 0 = model.friction
+    table_height: float = 0.0        # m, world z of the table top
+    ee_radius: float = 0.0           # m; 0 = model.ee_radius
+    ball_radius: float = 0.0         # m; 0 = model.ball_radius
+    ball_mass: float = 0.0           # kg; 0 = model.ball_mass
+    rolling_resistance: float = 0.0  # m: torque c m g opposing the ball's rolling (on the table)
+    torsional_friction: float = 0.0  # m: torque c m g opposing its spin about the vertical
+    viscous_drag: float = 0.0        # N s/m, force -c v on the ball
+    external_force: List[float] = dc.field(default_factory=lambda: [0.0, 0.0])  # N, world x, y
+
+
+@dc.dataclass
 class BallRollingScenario:
     task: str = "ball_rolling"
     name: str = "ball_rolling"
@@ -156,6 +177,7 @@ class BallRollingScenario:
     impedance: ImpedanceGains = dc.field(default_factory=ImpedanceGains)
     camera: CameraConfig = dc.field(default_factory=CameraConfig)
     safety: SafetyLimits = dc.field(default_factory=SafetyLimits)
+    drake: DrakeWorld = dc.field(default_factory=DrakeWorld)
     ball_start_angle_deg: float = 0.0   # where on the circle the ball starts (0 = +y of centre)
     sim_time_step: float = 0.001        # true plant step, s
     sim_duration_s: float = 60.0
@@ -214,9 +236,26 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
     need(0 < s.camera.filter_alpha <= 1, "camera.filter_alpha must be in (0, 1]")
     positive("sim_time_step", s.sim_time_step)
     _validate_safety(s.safety, need, positive)
+    _validate_drake(s.drake, need, positive)
     if len(s.c3.q_diag) not in (0, 19):
         raise ScenarioError(f"c3.q_diag must have 19 entries for ball rolling, got {len(s.c3.q_diag)}")
 
+
+
+def _validate_drake(d: DrakeWorld, need, positive) -> None:
+    def finite(v):
+        return isinstance(v, (int, float)) and math.isfinite(v)
+    positive("drake.point_stiffness", d.point_stiffness)
+    for key in ("time_step", "relaxation_time", "ee_radius", "ball_radius", "ball_mass",
+                "rolling_resistance", "torsional_friction", "viscous_drag"):
+        need(finite(getattr(d, key)) and getattr(d, key) >= 0,
+             f"drake.{key} must be >= 0, got {getattr(d, key)}")
+    need(finite(d.table_height) and abs(d.table_height) < 0.1,
+         f"drake.table_height must be within 0.1 m, got {d.table_height}")
+    need(len(d.friction) == 2 and all(finite(v) for v in d.friction),
+         "drake.friction must be [ee_ball, ball_table] (< 0: model.friction)")
+    need(len(d.external_force) == 2 and all(finite(v) for v in d.external_force),
+         "drake.external_force must be [fx, fy] (N)")
 
 
 def _validate_safety(f: SafetyLimits, need, positive) -> None:
