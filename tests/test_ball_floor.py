@@ -1,7 +1,7 @@
 """The ball model's error floor on the other engine's clean data (ball_floor.py)."""
 import json
 
-from adaptive_c3.tools.diagnosis.ball_floor import WORST, floor_of_draw, main
+from adaptive_c3.tools.diagnosis.harness.ball_floor import WORST, floor_of_draw, main
 
 
 def test_the_floor_sits_in_contact_changes_of_the_push():

@@ -1,6 +1,6 @@
 """ball_hit_rate's summary reports the answers separately: an ambiguous verdict is never
 counted as right (issue 30)."""
-from adaptive_c3.tools.diagnosis.ball_hit_rate import answer_line, summarise
+from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import answer_line, summarise
 
 
 def _row(truth, verdict, named, in_set=None, in_ci=False):

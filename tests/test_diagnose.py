@@ -7,10 +7,10 @@ import pytest
 from adaptive_c3.models.cartpole import cartpole_lcs
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.cli import main
-from adaptive_c3.tools.diagnosis.concealed_data import NOISE_STD, concealed_draw, make_recording, Truth
-from adaptive_c3.tools.diagnosis.effects import (EFFECT_NAMES, Candidate, applicable_candidates,
+from adaptive_c3.tools.diagnosis.harness.concealed_data import NOISE_STD, concealed_draw, make_recording, Truth
+from adaptive_c3.tools.diagnosis.backends.effects import (EFFECT_NAMES, Candidate, applicable_candidates,
                                                 cartpole_spec, patch, rollout)
-from adaptive_c3.tools.diagnosis.locate import LAG, estimate_noise, make_windows
+from adaptive_c3.tools.diagnosis.engine.locate import LAG, estimate_noise, make_windows
 from adaptive_c3.tools.recording import Recording, save_recording
 
 CARTPOLE = str(SCENARIO_DIR / "cartpole_softwalls.yaml")
@@ -140,14 +140,14 @@ def test_a_run_log_diagnoses_its_wall_offset(tmp_path):
 
 
 def test_sindy_baseline_names_an_obvious_effect(spec):
-    from adaptive_c3.tools.diagnosis.sindy_baseline import sindy_diagnose
+    from adaptive_c3.tools.diagnosis.harness.sindy_baseline import sindy_diagnose
     rec, truth, _ = concealed_draw(1, name="external_force", target="cart_x")
     sel = sindy_diagnose(rec, spec)["selected"][0]
     assert (sel["name"], sel["target"]) == ("external_force", "cart_x")
 
 
 def test_scored_draw_reports_named_interval_and_cut():
-    from adaptive_c3.tools.diagnosis.concealed_data import score_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import score_draw
     row = score_draw(21, name="viscous_damping", target="cart_x")
     assert row["named"] and row["in_interval"] and row["clean_cut"] >= 5
 

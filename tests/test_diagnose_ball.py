@@ -9,10 +9,10 @@ import pytest
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.cli import main
-from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
-from adaptive_c3.tools.diagnosis.effects_ball import ModelParams
-from adaptive_c3.tools.diagnosis.effects import Candidate, applicable_candidates, patch, rollout
-from adaptive_c3.tools.diagnosis.locate import LAG, make_windows
+from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
+from adaptive_c3.tools.diagnosis.backends.effects import Candidate, applicable_candidates, patch, rollout
+from adaptive_c3.tools.diagnosis.engine.locate import LAG, make_windows
 from adaptive_c3.tools.recording import save_recording
 
 BALL = str(SCENARIO_DIR / "ball_rolling.yaml")
@@ -31,7 +31,7 @@ def short_draw(scenario):
 
 
 def _spec(scenario):
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
     return ball_spec(scenario)
 
 
@@ -50,7 +50,7 @@ def test_unpatched_step_is_the_anitescu_lcs(scenario, short_draw, gate):
     """The batched model's one step equals AnitescuLinearizer.linearize + Lcs.step (with
     and without the open-pair gate, the same on both sides)."""
     from adaptive_c3.models.ball_rolling_controller_model import ball_rolling_linearizer
-    from adaptive_c3.tools.diagnosis.effects_ball import POS
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import POS
     rec = short_draw[0]
     spec = _spec(scenario)
     spec.open_pair_tol = gate
@@ -119,9 +119,9 @@ def test_cli_names_a_concealed_ball_effect(tmp_path, scenario):
                                               (33, "none", "")])
 def test_diagnose_names_a_force_and_none_on_clean_data(scenario, seed, name, target):
     """In-process, single effects only (pairs off, to keep the default run fast)."""
-    from adaptive_c3.tools.diagnosis.concealed_data import _named
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import _named
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
-    from adaptive_c3.tools.diagnosis.report import selected_rows
+    from adaptive_c3.tools.diagnosis.engine.report import selected_rows
     rec, truth, _ = concealed_draw(seed, name=name, target=target,
                                    params=ModelParams.from_scenario(scenario), **SHORT)
     sel = selected_rows(diagnose(rec, _spec(scenario), progress=False, pairs=False))
@@ -167,8 +167,8 @@ def ball_hit_rate(tmp_path_factory):
     """>= 30 random draws (seeds 5000..) + clean draws, scored once for the module.
     The original single-engine harness (vary=False); the varied one is in
     test_diagnose_ball_verdict.py."""
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
-    from adaptive_c3.tools.diagnosis.concealed_data import hit_rates
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import hit_rates
     rows = [score_draw(s, vary=False) for s in range(5000, 5032)]
     summary = hit_rates(rows)
     out = (os.environ.get("ADAPTIVE_C3_BALL_HIT_RATE_JSON")

@@ -4,7 +4,7 @@ release option makes free coasts, every proposal is a valid change of the gait, 
 import numpy as np
 import pytest
 
-from adaptive_c3.tools.diagnosis.ball_excitation import Excitation, merge_changes, quintic
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Excitation, merge_changes, quintic
 from adaptive_c3.tools.recording import Recording, RecordingError, concat_recordings
 
 
@@ -34,7 +34,7 @@ def test_excitation_changes_are_checked_and_merged():
 
 
 def test_every_proposal_is_a_gait_change():
-    from adaptive_c3.tools.diagnosis.evidence import (DEFAULT_SEPARATION, MORE_EVIDENCE,
+    from adaptive_c3.tools.diagnosis.engine.evidence import (DEFAULT_SEPARATION, MORE_EVIDENCE,
                                                       SEPARATING, with_more_of_everything)
     for text, change in [*SEPARATING.values(), *MORE_EVIDENCE.values(), DEFAULT_SEPARATION]:
         assert text and change
@@ -44,7 +44,7 @@ def test_every_proposal_is_a_gait_change():
 
 
 def test_release_pushes_let_the_ball_coast_clear_of_the_ee():
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
     ex = dict(release_speed=[0.1, 0.2], duration_s=2.4, directions="axes", episodes=4)
     rec, truth, clean = concealed_draw(3, name="none", follow_up=ex)
     assert truth.name == "none" and len(set(rec.episode)) == 4
@@ -83,7 +83,7 @@ def test_cli_also_diagnoses_a_second_recording_as_more_episodes(tmp_path, capsys
     import json
 
     from adaptive_c3.tools.cli import main
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
     from adaptive_c3.tools.recording import save_recording
     a, _, _ = concealed_draw(7, name="none", episodes=3, duration_s=1.2)
     b, _, _ = concealed_draw(7, name="none", follow_up=dict(episodes=3, duration_s=1.2))
@@ -106,7 +106,7 @@ def test_running_the_proposed_coast_separates_drag_from_rolling_resistance():
     rest under the EE) cannot tell from rolling resistance; the report proposes release
     pushes with free coasts, and with that second recording drag is named, its value
     inside the interval."""
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
     r = score_draw(8007, baseline=False, follow_up=True)
     assert r["truth"]["name"] == "viscous_damping"
     assert r["verdict"] == "ambiguous" and "viscous_damping[ball]" in r["ambiguous"]
@@ -119,12 +119,12 @@ def test_r_comp_with_a_calibration_sized_pair_is_no_choice():
     """r_comp offsets both pairs; when one of them is inside the calibration tolerance
     (1 mm) that part is calibration and the other pair's contact_offset is the answer
     (draw 9039: a -2.33 mm table offset was named r_comp with 0.4 mm on the EE-ball pair)."""
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
-    from adaptive_c3.tools.diagnosis.effects import Candidate
-    from adaptive_c3.tools.diagnosis.fit import _calibration_sized
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+    from adaptive_c3.tools.diagnosis.engine.fit import _calibration_sized
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.fit import Fit
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.engine.fit import Fit
     spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
 
     def fit(cands, values):
@@ -148,9 +148,9 @@ def test_report_shows_the_value_refitted_per_phase():
     from types import SimpleNamespace
 
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.effects import Candidate
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.report import _params
+    from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.engine.report import _params
     spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
     fit = SimpleNamespace(cands=[Candidate("contact_offset", "ee_ball")],
                           values=np.array([2.5e-3]), ci=np.array([[2.0e-3, 3.0e-3]]),
@@ -168,8 +168,8 @@ def test_mass_is_judged_against_its_own_spurious_level():
     friction reaches 7.6 %), so it needs the global 2 % cut, not the 10 % the contact
     effects need. Draw 8000 (a 1.71x ball), reported `none` before: mass first, its
     value inside the interval, friction beside it in the ambiguous set."""
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
-    from adaptive_c3.tools.diagnosis.effects_ball import BallSpec
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import BallSpec
     assert BallSpec.__dataclass_fields__["min_reduction_by_effect"].default_factory() \
         == {"mass_scale": 0.02}
     r = score_draw(8000, baseline=False)

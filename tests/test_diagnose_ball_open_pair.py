@@ -8,9 +8,9 @@ import pytest
 from adaptive_c3.models.ball_rolling_controller_model import (INPUT_NAMES, STATE_NAMES,
                                                               ball_rolling_linearizer)
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-from adaptive_c3.tools.diagnosis.effects import patch, rollout
-from adaptive_c3.tools.diagnosis.effects_ball import G, ball_spec
-from adaptive_c3.tools.diagnosis.locate import LAG, make_windows
+from adaptive_c3.tools.diagnosis.backends.effects import patch, rollout
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import G, ball_spec
+from adaptive_c3.tools.diagnosis.engine.locate import LAG, make_windows
 from adaptive_c3.tools.recording import Recording
 
 SPEED = 0.2          # m/s, the ball rolls along +x

@@ -9,11 +9,11 @@ import numpy as np
 import pytest
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-from adaptive_c3.tools.diagnosis.concealed_ball_data import Variation, concealed_draw
-from adaptive_c3.tools.diagnosis.effects import Candidate
-from adaptive_c3.tools.diagnosis.effects_ball import ModelParams
-from adaptive_c3.tools.diagnosis.evidence import Z_AMBIG, not_excluded, verdict
-from adaptive_c3.tools.diagnosis.fit import Fit
+from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import Variation, concealed_draw
+from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
+from adaptive_c3.tools.diagnosis.engine.evidence import Z_AMBIG, not_excluded, verdict
+from adaptive_c3.tools.diagnosis.engine.fit import Fit
 
 BALL = str(SCENARIO_DIR / "ball_rolling.yaml")
 
@@ -80,7 +80,7 @@ def test_near_miss_is_judged_against_the_effects_own_bar():
 def test_an_effect_joins_the_set_once():
     """Draw 9019 listed rolling resistance twice: a near miss on all windows and again
     on the free windows."""
-    from adaptive_c3.tools.diagnosis.evidence import _join, fit_row
+    from adaptive_c3.tools.diagnosis.engine.evidence import _join, fit_row
     near = _fit("rolling_resistance", "ball_table", NONE - 7 + RNG.normal(0, 1, 30), NONE)
     judged = verdict([near], None, NONE_EVAL, 0.1)
     assert [a["name"] for a in judged["ambiguous"]] == ["none", "rolling_resistance"]
@@ -94,7 +94,7 @@ def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     calibration draw 201: mass 95 % interval 0.61-1.69 (nothing cut the held-out SSR);
     draws 8008 and 9010, balls 1.65x and 1.48x heavier, were reported a confident
     `none` with intervals 0.99-1.96 and 0.58-2.59."""
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
     spec = ball_spec(load_scenario(BALL)[0])
     mass = _fit("mass_scale", "ball", NONE + RNG.normal(0, 1, 30), NONE)
     fric = _fit("friction_coefficient", "ee_ball", mass.test_cluster_ssr, NONE)
@@ -112,7 +112,7 @@ def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     assert judged["ambiguous"][1]["ci95"] == [0.61, 1.69]
     assert judged["separating_excitation"][0]["between"] == ["none", "mass_scale"]
     assert judged["separating_excitation"][0]["excitation"]["release_speed"][0] > 0
-    from adaptive_c3.tools.diagnosis.report import ambiguity_summary
+    from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
     assert "not excluded: 95% interval 0.61 to 1.69" in ambiguity_summary(judged)
     # a free-ball effect's interval is read from its free-window fit; its score is global
     drag_free = _fit("viscous_damping", "ball", mass.test_cluster_ssr, NONE)
@@ -177,8 +177,8 @@ def test_delayed_force_named_with_its_evidence(delayed_force_report):
 def test_hit_rate_fast(seed, name, target):
     """Two varied draws scored as the slow run scores them: the truth named first, or
     (ambiguous verdict) inside the ambiguous set; the summary counts them."""
-    from adaptive_c3.tools.diagnosis.ball_hit_rate import summarise
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import summarise
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
     row = score_draw(seed, baseline=False, pairs=False, name=name, target=target)
     assert row["named"] or row["in_ambiguous_set"], row
     label = f"{name}[{target}]" if target else name
@@ -191,7 +191,7 @@ def test_ball_per_effect_hit_rate_slow(tmp_path):
     """>= 40 concealed draws with the second-engine variation, each ambiguous verdict
     followed by one recording with the excitation the report proposed (as its user
     would); writes JSON + a figure. Bars for the first answer and after the follow-up."""
-    from adaptive_c3.tools.diagnosis.ball_hit_rate import run
+    from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import run
     out = os.environ.get("ADAPTIVE_C3_BALL_HIT_RATE_DIR") or str(tmp_path)
     s = run(40, 8000, Path(out), follow_up=True)
     print(json.dumps(s, indent=1))
@@ -228,9 +228,9 @@ def test_calibration_offset_is_a_nuisance_only_and_folds_into_a_selected_offset(
     from types import SimpleNamespace
 
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.effects import EFFECTS, Candidate, applicable_candidates
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.report import _params
+    from adaptive_c3.tools.diagnosis.backends.effects import EFFECTS, Candidate, applicable_candidates
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.engine.report import _params
     spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
     assert EFFECTS["calibration_offset"].nuisance_only
     assert ("calibration_offset", "ball_table") in spec.nuisance
@@ -259,7 +259,7 @@ def test_calibration_offset_is_a_nuisance_only_and_folds_into_a_selected_offset(
     (8026, "contact_offset", False, True),    # a 2.3 mm EE-ball offset is not calibration
 ])
 def test_calibration_nuisance_on_concealed_draws(seed, effect, calibration_kept, named):
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
     r = score_draw(seed, baseline=False)
     assert r["truth"]["name"] == effect
     if named:
@@ -285,7 +285,7 @@ def test_interval_allows_for_the_nuisances_and_the_push_force(seed, effect):
     calibrations of pairs it does not offset itself), and on light and firm pushes
     apart: the shift and the spread widen the interval, which then holds the truth on
     these draws it missed before."""
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import score_draw
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
     r = score_draw(seed, baseline=False)
     assert r["truth"]["name"] == effect and r["named"], r["selected"]
     assert r["in_interval"], r["selected"]

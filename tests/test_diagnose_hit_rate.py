@@ -1,7 +1,7 @@
 """Proof on concealed effects (issue 6): hit rate of `diagnose` and of the SINDy baseline.
 
 Each draw: the harness picks an effect of the library (or none) and its size from a
-seed, makes a cart-pole recording with it (tools/diagnosis/concealed_data.py), runs the diagnosis
+seed, makes a cart-pole recording with it (tools/diagnosis/harness/concealed_data.py), runs the diagnosis
 and the baseline on the recording alone, and scores them against the truth:
   named        exactly one effect selected, with the concealed name and target
                (r_comp never counts as contact_offset; a pair never counts as a single)
@@ -17,7 +17,7 @@ import os
 import numpy as np
 import pytest
 
-from adaptive_c3.tools.diagnosis.concealed_data import DRAWABLE, hit_rates, score_draw
+from adaptive_c3.tools.diagnosis.harness.concealed_data import DRAWABLE, hit_rates, score_draw
 
 
 def _run(seeds, **kw):

@@ -11,11 +11,11 @@ import pytest
 from adaptive_c3.scenarios.rigid_object_schema import RigidObjectScenario
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools import cli
-from adaptive_c3.tools.diagnosis.concealed_rigid_data import concealed_tosses
-from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator
-from adaptive_c3.tools.diagnosis.drake_baseline import with_drake
-from adaptive_c3.tools.diagnosis.initial_state import ballistic_start
-from adaptive_c3.tools.diagnosis.rigid_diagnose import diagnose_rigid
+from adaptive_c3.tools.diagnosis.harness.concealed_rigid_data import concealed_tosses
+from adaptive_c3.tools.diagnosis.backends.drake_backend import DrakeRigidSimulator
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.drake_baseline import with_drake
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.initial_state import ballistic_start
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import diagnose_rigid
 from adaptive_c3.tools.recording import save_recording
 
 CUBE = SCENARIO_DIR / "cube_toss.yaml"
@@ -115,7 +115,7 @@ def test_drake_diagnosis_finds_concealed_friction_and_its_patch_runs(tmp_path, c
 
 def test_patched_external_force_key_runs(tmp_path):
     """An indexed key (drake.external_force[2]) lands in the patched YAML as a full list."""
-    from adaptive_c3.tools.diagnosis.rigid_report import patched_scenario_text
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_report import patched_scenario_text
     text = patched_scenario_text(CUBE.read_text(), {"drake.external_force[2]": 0.1,
                                                     "drake.viscous_drag": 0.05})
     (tmp_path / "p.yaml").write_text(text)
@@ -129,7 +129,7 @@ def real_comparison():
     """rigid_compare on the real tosses (both diagnoses; ~25 min on 2 loaded cores)."""
     if not DATA.is_file():
         pytest.skip("../shared/data/cube_tosses.npz not present")
-    from adaptive_c3.tools.diagnosis.rigid_compare import compare
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_compare import compare
     from adaptive_c3.tools.recording import load_recording
     scenario, _ = load_scenario(CUBE)
     return compare(load_recording(DATA), scenario, progress=False)

@@ -1,4 +1,4 @@
-"""Drake's own simulation of a rigid_object scenario (tools/diagnosis/drake_baseline.py)."""
+"""Drake's own simulation of a rigid_object scenario (tools/diagnosis/tasks/rigid_object/drake_baseline.py)."""
 from __future__ import annotations
 
 import numpy as np
@@ -6,7 +6,7 @@ import pytest
 
 from adaptive_c3.models.rigid_object import orientation_error_deg
 from adaptive_c3.scenarios.rigid_object_schema import RigidObjectScenario
-from adaptive_c3.tools.diagnosis.drake_baseline import (DrakeRigidSimulator, score_episodes,
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.drake_baseline import (DrakeRigidSimulator, score_episodes,
                                                         tune_drake, with_drake)
 
 DT = 1.0 / 148

@@ -4,7 +4,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from adaptive_c3.tools.diagnosis.episodes import (
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import (
     find_twins, fit_yaw_shift, pair_distance, split_episodes, twin_groups)
 from adaptive_c3.tools.recording import Recording, load_recording
 

@@ -11,7 +11,7 @@ from adaptive_c3.models.rigid_object import (RECORDING_STATE_NAMES, orientation_
                                              plant_state, recording_state)
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools import cli
-from adaptive_c3.tools.diagnosis.rigid_model import RigidObjectModel
+from adaptive_c3.tools.diagnosis.backends.rigid_model import RigidObjectModel
 from adaptive_c3.tools.recording import Recording, save_recording
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "cube_tosses.npz"

@@ -6,6 +6,10 @@ imports (module-level and the ones inside functions alike):
 - models/ imports only models/ and the core's systems/contact;
 - scenarios/ imports only scenarios/;
 - diagrams/ never imports tools/;
+- inside tools/diagnosis: the engine imports only the engine and the backends, the
+  backends only the backends, a task (tasks/<task>) the engine, the backends and itself,
+  and only the harness and tools/bench (it times diagnoses of harness data)
+  import the harness;
 - no import circles anywhere (tests/ excluded: tests may import anything).
 
 The checker runs on the real tree and on synthetic trees that break one rule each, so
@@ -22,6 +26,8 @@ ROOT = Path(__file__).resolve().parents[1]
 PACKAGE = "adaptive_c3"
 TOP = ("systems", "diagrams", "models", "scenarios", "tools")
 CORE = ("systems.contact", "systems.c3", "systems.learning")
+DIAG = "tools.diagnosis"
+ENGINE, BACKENDS, TASKS, HARNESS = (f"{DIAG}.{w}" for w in ("engine", "backends", "tasks", "harness"))
 
 
 def _module_name(root: Path, path: Path) -> str:
@@ -76,6 +82,15 @@ def layering_violations(graph: dict[str, set[str]]) -> list[str]:
                 bad.append(f"{mod} -> {dep}: scenarios/ imports only scenarios/")
             elif _in(mod, "diagrams") and _in(dep, "tools"):
                 bad.append(f"{mod} -> {dep}: diagrams/ never imports tools/")
+            elif _in(dep, HARNESS) and not _in(mod, HARNESS, "tools.bench"):
+                bad.append(f"{mod} -> {dep}: only the harness and the bench import the diagnosis harness")
+            elif _in(mod, ENGINE) and _in(dep, DIAG) and not _in(dep, ENGINE, BACKENDS):
+                bad.append(f"{mod} -> {dep}: the diagnosis engine imports only the engine and the backends")
+            elif _in(mod, BACKENDS) and _in(dep, DIAG) and not _in(dep, BACKENDS):
+                bad.append(f"{mod} -> {dep}: the diagnosis backends import only the backends")
+            elif (_in(mod, TASKS) and _in(dep, DIAG)
+                  and not _in(dep, ENGINE, BACKENDS, ".".join(mod.split(".")[:4]))):
+                bad.append(f"{mod} -> {dep}: a diagnosis task imports the engine, the backends and itself")
     return bad
 
 
@@ -164,6 +179,14 @@ CLEAN = {
     "scenarios/common.py": "X = 1\n",
     "diagrams/rolling.py": "import adaptive_c3.systems.rolling.planner\n",
     "tools/cli.py": ("def main():\n    from adaptive_c3.diagrams.rolling import build\n"),
+    "tools/diagnosis/engine/fit.py": "from adaptive_c3.tools.diagnosis.backends import effects\n",
+    "tools/diagnosis/backends/effects.py": "import numpy\n",
+    "tools/diagnosis/tasks/ball/model.py": ("from adaptive_c3.tools.diagnosis.engine import fit\n"
+                                            "from adaptive_c3.tools.diagnosis.tasks.ball import gait\n"),
+    "tools/diagnosis/tasks/ball/gait.py": "X = 1\n",
+    "tools/diagnosis/tasks/cube/model.py": "from adaptive_c3.tools.diagnosis.backends import effects\n",
+    "tools/diagnosis/harness/draws.py": "from adaptive_c3.tools.diagnosis.tasks.ball import model\n",
+    "tools/diagnosis/diagnose.py": "from adaptive_c3.tools.diagnosis.tasks.cube import model\n",
 }
 
 
@@ -184,6 +207,16 @@ def test_checker_passes_a_clean_tree(tmp_path):
     ("models/ball.py", "from adaptive_c3.systems.rolling.planner import P\n", "models/ imports only"),
     ("scenarios/common.py", "from adaptive_c3.models.ball import R\n", "scenarios/ imports only"),
     ("diagrams/rolling.py", "from adaptive_c3.tools.cli import main\n", "diagrams/ never imports tools/"),
+    ("tools/diagnosis/diagnose.py", "from adaptive_c3.tools.diagnosis.harness import draws\n",
+     "only the harness and the bench"),
+    ("tools/diagnosis/engine/fit.py", "from adaptive_c3.tools.diagnosis.tasks.ball import gait\n",
+     "engine imports only"),
+    ("tools/diagnosis/backends/effects.py", "import adaptive_c3.tools.diagnosis.engine.fit\n",
+     "backends import only"),
+    ("tools/diagnosis/tasks/cube/model.py", "from adaptive_c3.tools.diagnosis.tasks.ball import gait\n",
+     "task imports the engine"),
+    ("tools/diagnosis/tasks/ball/gait.py", "from adaptive_c3.tools.diagnosis import diagnose\n",
+     "task imports the engine"),
 ])
 def test_checker_catches_one_forbidden_import(tmp_path, rel, line, rule):
     files = dict(CLEAN)

@@ -9,11 +9,11 @@ import pytest
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools import cli
-from adaptive_c3.tools.diagnosis.concealed_rigid_data import concealed_tosses
-from adaptive_c3.tools.diagnosis.rigid_diagnose import (bootstrap_interval, diagnose_rigid,
+from adaptive_c3.tools.diagnosis.harness.concealed_rigid_data import concealed_tosses
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import (bootstrap_interval, diagnose_rigid,
                                                         paired_gain, refine_minimum,
                                                         with_values)
-from adaptive_c3.tools.diagnosis.rigid_locate import lowest_corner, phases
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_locate import lowest_corner, phases
 from adaptive_c3.tools.recording import save_recording
 
 CUBE = SCENARIO_DIR / "cube_toss.yaml"

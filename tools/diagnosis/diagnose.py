@@ -6,11 +6,11 @@ interval, writes a patched scenario and shows the held-out fit improve:
 DIR/report.json, DIR/report.html (+ PNG plots), DIR/patched_scenario.yaml.
 
 Tasks: cartpole (a constant LCS) and ball_rolling (the controller model's Anitescu LCS
-linearised at every recording sample, tools/diagnosis/effects_ball.py; the recording
+linearised at every recording sample, tools/diagnosis/tasks/ball_rolling/effects_ball.py; the recording
 must be sampled at 100 Hz). rigid_object scenarios (free bodies tossed onto a table, many
-episodes, full open-loop rollouts) are diagnosed by tools/diagnosis/rigid_diagnose.py.
+episodes, full open-loop rollouts) are diagnosed by tools/diagnosis/tasks/rigid_object/rigid_diagnose.py.
 
-Ball rolling, besides (tools/diagnosis/evidence.py): a sensor delay is fitted first and
+Ball rolling, besides (tools/diagnosis/engine/evidence.py): a sensor delay is fitted first and
 kept in the model (report `nuisance`); rolling resistance, drag and a constant force are
 also fitted and judged on the windows where the ball rolls or rests without the EE; the
 report says `verdict` named | ambiguous | none, lists the `ambiguous` set with held-out
@@ -33,14 +33,14 @@ import numpy as np
 import yaml
 
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
-from adaptive_c3.tools.diagnosis.effects import (EFFECTS, Candidate, applicable_candidates,
+from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.evidence import (evidence_windows, free_ball_verdict,
+from adaptive_c3.tools.diagnosis.engine.evidence import (evidence_windows, free_ball_verdict,
                                                   not_excluded, widen_for_phases,
                                                   window_phases)
-from adaptive_c3.tools.diagnosis.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
+from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
                                              widen_for_nuisance)
-from adaptive_c3.tools.diagnosis.locate import (contact_summary, estimate_noise, locate,
+from adaptive_c3.tools.diagnosis.engine.locate import (contact_summary, estimate_noise, locate,
                                                make_windows, prediction_floor)
 from adaptive_c3.tools.recording import RecordingError, load_recording
 
@@ -97,7 +97,7 @@ def model_spec(scenario):
     if task == "cartpole":
         return cartpole_spec(scenario)
     if task == "ball_rolling":
-        from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+        from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
         return ball_spec(scenario)
     raise _user_error(f"diagnose supports the cartpole and ball_rolling tasks, not '{task}'")
 
@@ -150,8 +150,8 @@ def fold_ids(rec, W) -> tuple[np.ndarray, str]:
 
 def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
     """Out-of-fold errors: RMSE per state and RMS in noise-floor units. models: fold -> P."""
-    from adaptive_c3.tools.diagnosis.effects import rollout
-    from adaptive_c3.tools.diagnosis.locate import LAG
+    from adaptive_c3.tools.diagnosis.backends.effects import rollout
+    from adaptive_c3.tools.diagnosis.engine.locate import LAG
     keep = (fold >= 0) if mask is None else (fold >= 0) & mask
     errs = []
     for k, P in models.items():
@@ -174,7 +174,7 @@ def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
 def long_problem(rec, spec, prob, P0, sigma, stride: int):
     """prob's fit problem with FREE_HORIZON-step rollouts (the free-ball effects' fits;
     None for models without free-ball windows or recordings too short for them)."""
-    from adaptive_c3.tools.diagnosis.evidence import FREE_HORIZON
+    from adaptive_c3.tools.diagnosis.engine.evidence import FREE_HORIZON
     if not getattr(spec, "free_ball", False):
         return None
     try:
@@ -316,14 +316,14 @@ def _split_ci(fit, spec):
 
 def cmd_diagnose(args) -> int:
     from adaptive_c3.tools.user_input import resolve_scenario_path
-    from adaptive_c3.tools.diagnosis.report import write_report
+    from adaptive_c3.tools.diagnosis.engine.report import write_report
     rec = load_recording(args.recording)
     if getattr(args, "also", None):
         from adaptive_c3.tools.recording import concat_recordings
         rec = concat_recordings([rec] + [load_recording(p) for p in args.also])
     scenario, text, base = load_scenario_with_effects(resolve_scenario_path(args.scenario))
     if scenario.task == "rigid_object":
-        from adaptive_c3.tools.diagnosis.rigid_diagnose import cmd_diagnose_rigid
+        from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import cmd_diagnose_rigid
         return cmd_diagnose_rigid(args, scenario, text, rec)
     if (getattr(args, "model", None) or "lcs") != "lcs":
         from adaptive_c3.tools.user_input import UserError

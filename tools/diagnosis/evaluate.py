@@ -1,11 +1,11 @@
 """`adaptive-c3 evaluate RECORDING --scenario S [--model lcs|drake]`: how well a model of
 the scenario predicts a recording, open loop.
 
-`--model` picks the backend (tools/diagnosis/model_backend.py): `lcs`, the controller's
+`--model` picks the backend (tools/diagnosis/backends/model_backend.py): `lcs`, the controller's
 Anitescu LCS re-linearised every step at the recording's step (default), or `drake`,
 Drake's SAP MultibodyPlant of the scenario's true world at a finer step. Every episode is
 rolled out for its whole length from a start estimated from its first rows
-(`--initial-state`, tools/diagnosis/initial_state.py: `ballistic`, a fit of the
+(`--initial-state`, tools/diagnosis/tasks/rigid_object/initial_state.py: `ballistic`, a fit of the
 free-flight prefix, default; `first-row`, the recorded first row), the same start for
 every model compared, and compared with the recording sample by sample:
   position_pct_mean / _final   |p_model - p_data| as % of the object's size (its longest
@@ -25,57 +25,10 @@ from pathlib import Path
 
 import numpy as np
 
-from adaptive_c3.models.rigid_object import RECORDING_STATE_NAMES, orientation_error_deg
 from adaptive_c3.tools.progress import Progress
 from adaptive_c3.tools.user_input import UserError
-
-METRICS = ("position_pct_mean", "position_pct_final", "orientation_deg_mean",
-           "orientation_deg_final")
-DT_TOLERANCE = 0.05      # relative spread of sample steps allowed within a recording
-
-
-def recording_episodes(rec, episode_ids=None) -> tuple[dict, float]:
-    """({episode id: (t [T], x [T, 13])}, dt) after checking the recording fits a
-    rigid-object model: state names, at least two rows per episode, a uniform step."""
-    if list(rec.state_names) != list(RECORDING_STATE_NAMES):
-        raise UserError(f"recording state names {list(rec.state_names)} do not match the "
-                        f"rigid object's {list(RECORDING_STATE_NAMES)}")
-    episodes = {int(e): idx for e, idx in rec.episodes()}
-    if episode_ids is not None:
-        missing = sorted(set(episode_ids) - set(episodes))
-        if missing:
-            raise UserError(f"episodes not in the recording: {missing[:10]}")
-        episodes = {e: episodes[e] for e in episode_ids}
-    steps = []
-    for e, idx in episodes.items():
-        if len(idx) < 2:
-            raise UserError(f"episode {e} has {len(idx)} row; an episode needs at least 2")
-        steps.append(np.diff(rec.t[idx]))
-    steps = np.concatenate(steps)
-    dt = float(np.median(steps))
-    if np.max(np.abs(steps - dt)) > DT_TOLERANCE * dt:
-        raise UserError(f"the recording's time step is not uniform (median {dt:g} s, "
-                        f"range {steps.min():g}-{steps.max():g} s); resample it first")
-    return {e: (rec.t[idx], rec.x[idx]) for e, idx in episodes.items()}, dt
-
-
-def episode_errors(x_model: np.ndarray, x_data: np.ndarray, size: float) -> dict:
-    """The per-episode metrics of METRICS for two [T, 13] recording-layout arrays."""
-    pos = np.linalg.norm(x_model[:, 0:3] - x_data[:, 0:3], axis=1) / size * 100.0
-    ori = orientation_error_deg(x_model[:, 3:7], x_data[:, 3:7])
-    return {"position_pct_mean": float(pos.mean()), "position_pct_final": float(pos[-1]),
-            "orientation_deg_mean": float(ori.mean()), "orientation_deg_final": float(ori[-1])}
-
-
-def summarise(per_episode: list[dict]) -> dict:
-    out = {"episodes": len(per_episode)}
-    for key in METRICS:
-        v = np.array([e[key] for e in per_episode])
-        out[f"{key}_median"] = float(np.median(v))
-        out[f"{key}_mean"] = float(np.mean(v))
-        out[f"{key}_p90"] = float(np.percentile(v, 90))
-    return out
-
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import (METRICS, episode_errors,
+                                                                recording_episodes, summarise)
 
 def evaluate(rec, scenario, baselines=(), episode_ids=None, progress: bool = True,
              keep_rollouts: int = 4, model: str = "lcs", initial_state: str = "ballistic",
@@ -84,8 +37,8 @@ def evaluate(rec, scenario, baselines=(), episode_ids=None, progress: bool = Tru
     scenario's `model` backend under summary key "model", each baseline backend under its
     name, every one rolled out from the same estimated start of each episode."""
     from adaptive_c3.models.rigid_object import RigidObjectParams
-    from adaptive_c3.tools.diagnosis.initial_state import METHODS, initial_states
-    from adaptive_c3.tools.diagnosis.model_backend import Scorer, check_model
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.initial_state import METHODS, initial_states
+    from adaptive_c3.tools.diagnosis.backends.model_backend import Scorer, check_model
     if scenario.task != "rigid_object":
         raise UserError(f"evaluate supports task rigid_object scenarios, not '{scenario.task}'")
     check_model(model)
@@ -189,7 +142,7 @@ def cmd_evaluate(args) -> int:
     from adaptive_c3.tools.user_input import resolve_scenario_path
     scenario, _ = load_scenario(resolve_scenario_path(args.scenario), list(args.set or []))
     rec = load_recording(args.recording)
-    from adaptive_c3.tools.diagnosis.model_backend import check_model
+    from adaptive_c3.tools.diagnosis.backends.model_backend import check_model
     model = check_model(getattr(args, "model", None) or "lcs")
     baselines = [check_model(args.baseline)] if args.baseline else []
     workers = int(getattr(args, "workers", None) or 2)

@@ -1,9 +1,9 @@
 """Per-effect hit rates of `diagnose` on concealed ball-rolling draws (issue 19's marks).
 
-    python -m adaptive_c3.tools.diagnosis.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
+    python -m adaptive_c3.tools.diagnosis.harness.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
         [--follow-up] [--no-open-pair-gate]
 
-Each draw (tools/diagnosis/concealed_ball_data.py, with the second-engine variation) is
+Each draw (tools/diagnosis/harness/concealed_ball_data.py, with the second-engine variation) is
 diagnosed and scored:
   named          the concealed effect (or none) is the one selected, i.e. named first
   favoured       ... and the verdict is `named` (not ambiguous)
@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.concealed_ball_data import label as _label, score_draw
+from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import label as _label, score_draw
 
 TARGETS = dict(named=0.90, none_on_clean=1.0, coverage=0.85, truth_in_ambiguous=1.0,
                median_excess_cut=5.0)

@@ -61,7 +61,7 @@ def quat_exp(r: np.ndarray) -> np.ndarray:
 def free_flight_rows(x: np.ndarray, half_size, table_height: float) -> int:
     """How many leading rows of x [T, 13] have every corner above the table by CONTACT_GAP
     (capped at MAX_ROWS)."""
-    from adaptive_c3.tools.diagnosis.rigid_locate import lowest_corner
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_locate import lowest_corner
     n = min(len(x), MAX_ROWS)
     touching = lowest_corner(x[:n], half_size, table_height) < CONTACT_GAP
     return int(np.argmax(touching)) if touching.any() else n

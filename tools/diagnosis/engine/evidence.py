@@ -208,7 +208,7 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
     singles with z >= Z_AMBIG and at least half the reduction a choice of them needs
     (own_reduction: {effect: bar} where an effect has its own, else min_reduction) join
     `none`."""
-    from adaptive_c3.tools.diagnosis.fit import reduction_bar
+    from adaptive_c3.tools.diagnosis.engine.fit import reduction_bar
     physical = [f for f in fits if len(f.cands) == 1 and f.physical]
     z_worse = worse_z(len(physical) - 1 if family is None else family)
     singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG]
@@ -269,7 +269,7 @@ def free_ball_problem(prob):
     without the EE (None when fewer than two folds keep such windows). `prob` may have
     longer rollouts than the main problem (diagnose passes FREE_HORIZON): a constant
     deceleration and one in proportion to speed part over a longer coast."""
-    from adaptive_c3.tools.diagnosis.fit import Problem
+    from adaptive_c3.tools.diagnosis.engine.fit import Problem
     free = np.isin(window_phases(prob.spec, prob.windows), FREE_PHASES)
     fold = np.where(free, prob.fold, -1)
     sub = Problem(prob.spec, prob.base, prob.windows, fold, prob.weight, prob.cluster_steps,
@@ -287,7 +287,7 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     joins the ambiguous set. A consistent push-phase choice stays, with the free-window
     effect added to its ambiguous set (each explains different windows). With no choice
     anywhere, free-window near misses (FREE_NEAR_REDUCTION) join `none` in the set."""
-    from adaptive_c3.tools.diagnosis.fit import select
+    from adaptive_c3.tools.diagnosis.engine.fit import select
     gait = bool(getattr(prob.spec, "free_ball", False))     # the ball's push gait
     judged = verdict(fits, chosen, none_eval, min_reduction, gait=gait,
                      own_reduction=getattr(prob.spec, "min_reduction_by_effect", None))
@@ -369,7 +369,7 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     pinned down by the statistical interval (e.g. a compliant contact read as an offset).
     The pushes count as two phases, split at their median input force: a compliant
     contact gives under a firm push an offset (or friction) that a light push does not."""
-    from adaptive_c3.tools.diagnosis.fit import add_to_interval, linear_refit
+    from adaptive_c3.tools.diagnosis.engine.fit import add_to_interval, linear_refit
     if fit is None or fit.lin is None:
         return fit
     W = prob.used()

@@ -35,7 +35,7 @@ from pydrake.systems.analysis import Simulator
 from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
 from adaptive_c3.models.rigid_object import (RigidObjectParams, build_rigid_object_plant,
                                              plant_state, recording_state)
-from adaptive_c3.tools.diagnosis.drake_forces import add_body_forces, has_forces
+from adaptive_c3.tools.diagnosis.backends.drake_forces import add_body_forces, has_forces
 
 SUBSTEPS = 4             # SAP updates per recording step when drake.time_step is 0
 GRAVITY = 9.81           # m/s^2, Drake's default
@@ -116,7 +116,7 @@ class DrakeRigidSimulator:
 
     def step(self, x_plant: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """One recording step from a plant-layout state: (next plant-layout state, [number
-        of corner contacts at its end]) - what tools/diagnosis/rigid_locate.py asks of a
+        of corner contacts at its end]) - what tools/diagnosis/tasks/rigid_object/rigid_locate.py asks of a
         model (a nonzero second entry = in contact)."""
         X = self.rollout(recording_state(np.asarray(x_plant, float)), 1)
         results = self.plant.get_contact_results_output_port().Eval(self.plant_context)

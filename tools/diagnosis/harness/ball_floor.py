@@ -1,6 +1,6 @@
 """What the ball model's held-out error is made of when nothing is concealed.
 
-    python -m adaptive_c3.tools.diagnosis.ball_floor [DRAWS] [FIRST_SEED] [--out DIR]
+    python -m adaptive_c3.tools.diagnosis.harness.ball_floor [DRAWS] [FIRST_SEED] [--out DIR]
         [--no-open-pair-gate]
 
 The rigid 100 Hz Anitescu LCS that `diagnose` patches is compared with the other
@@ -39,13 +39,13 @@ def floor_of_draw(seed: int, episodes: int = 15, gate: bool = True) -> dict:
     """The model's mismatch on one clean draw (module doc); gate=False: without the
     open-pair gate (BallSpec.open_pair_tol = None, the model before issue 30)."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import (NOISE_STD, concealed_draw,
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import (NOISE_STD, concealed_draw,
                                                                  draw_variation)
     from adaptive_c3.tools.diagnosis.diagnose import HORIZON
-    from adaptive_c3.tools.diagnosis.effects import patch, rollout
-    from adaptive_c3.tools.diagnosis.effects_ball import ModelParams, ball_spec
-    from adaptive_c3.tools.diagnosis.evidence import window_phases
-    from adaptive_c3.tools.diagnosis.locate import LAG, make_windows
+    from adaptive_c3.tools.diagnosis.backends.effects import patch, rollout
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams, ball_spec
+    from adaptive_c3.tools.diagnosis.engine.evidence import window_phases
+    from adaptive_c3.tools.diagnosis.engine.locate import LAG, make_windows
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     var = replace(draw_variation(seed), sensor_delay=0.0)
     rec, _, _ = concealed_draw(seed, name="none", variation=var, noise_scale=1e-3,

@@ -46,8 +46,8 @@ from itertools import combinations
 import numpy as np
 from scipy.stats import t as student_t
 
-from adaptive_c3.tools.diagnosis.effects import Candidate, patch, rollout
-from adaptive_c3.tools.diagnosis.locate import LAG, Windows
+from adaptive_c3.tools.diagnosis.backends.effects import Candidate, patch, rollout
+from adaptive_c3.tools.diagnosis.engine.locate import LAG, Windows
 
 SCORE_MARGIN = 10.0     # "very strong" evidence on the BIC scale
 MIN_REDUCTION = 0.02    # held-out SSR must drop by >= 2% to count
@@ -422,7 +422,7 @@ def _calibration_sized(f, spec) -> bool:
     """A fit with an r_comp whose offset on some pair is within the calibration
     tolerance: that pair's part is calibration (a nuisance), not an effect; the other
     pair's contact_offset is the effect (chosen on its own merit), so it is no choice."""
-    from adaptive_c3.tools.diagnosis.effects import CALIBRATION_TOLERANCE
+    from adaptive_c3.tools.diagnosis.backends.effects import CALIBRATION_TOLERANCE
     return any(c.name == "r_comp" and np.any(np.abs(p) < CALIBRATION_TOLERANCE)
                for c, p in f.effects(spec))
 

@@ -1,5 +1,5 @@
 """The report of a rigid-object diagnosis: report.json, report.html (with plots), the
-patched scenario, and the plain-words summary (tools/diagnosis/rigid_diagnose.py)."""
+patched scenario, and the plain-words summary (tools/diagnosis/tasks/rigid_object/rigid_diagnose.py)."""
 from __future__ import annotations
 
 import html
@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import yaml
 
-from adaptive_c3.tools.diagnosis.report import embedded_figures
+from adaptive_c3.tools.diagnosis.engine.report import embedded_figures
 
 
 def _sure(gain: dict) -> str:
@@ -75,7 +75,7 @@ def plain_summary(result: dict) -> str:
 
 def patched_scenario_text(scenario_text: str, chosen: dict) -> str:
     data = yaml.safe_load(scenario_text) or {}
-    from adaptive_c3.tools.diagnosis.rigid_effects import set_key
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_effects import set_key
     from adaptive_c3.scenarios.rigid_object_schema import DrakeBaseline
     for key, value in chosen.items():
         if key.startswith("drake.external_force[") and "external_force" not in data.get("drake", {}):

@@ -14,7 +14,7 @@ import copy
 import re
 from dataclasses import dataclass
 
-from adaptive_c3.tools.diagnosis.rigid_model import key_value
+from adaptive_c3.tools.diagnosis.backends.rigid_model import key_value
 
 
 @dataclass(frozen=True)

@@ -24,7 +24,7 @@ rigid and undamped), a sensor delay of 0-8 ms (the recorded state lags the appli
 force: linear interpolation between samples), and a table height off by +-0.3 mm (for
 a contact_offset[ball_table] draw the effective truth is value - table_dz).
 
-Excitation (the push gait: tools/diagnosis/ball_excitation.py; `follow_up=` records
+Excitation (the push gait: tools/diagnosis/tasks/ball_rolling/ball_excitation.py; `follow_up=` records
 again under a gait change the report proposed): a 100 Hz controller (zero-order-held
 EE forces, PD on a moving EE target with gravity compensation, computed from the noisy
 measured state) repeats pushes of the ball in random directions, as the reference gait
@@ -51,9 +51,9 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.ball_excitation import Excitation, Pusher
-from adaptive_c3.tools.diagnosis.concealed_data import Truth, _either
-from adaptive_c3.tools.diagnosis.effects_ball import ModelParams
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Excitation, Pusher
+from adaptive_c3.tools.diagnosis.harness.concealed_data import Truth, _either
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
 
 DT = 0.01                  # recording / controller step, s
 SIM_DT = 1e-3              # SAP step, s
@@ -300,8 +300,8 @@ def concealed_draw(seed: int, name=None, target=None, vary: bool = True,
 def clean_error_cut(rec, clean, result) -> tuple[float, float]:
     """Cross-validated rollout error (fitted states) of the original and the patched model
     against the noise-free truth, in NOISE_STD units."""
-    from adaptive_c3.tools.diagnosis.effects import rollout
-    from adaptive_c3.tools.diagnosis.locate import LAG, make_windows
+    from adaptive_c3.tools.diagnosis.backends.effects import rollout
+    from adaptive_c3.tools.diagnosis.engine.locate import LAG, make_windows
     from adaptive_c3.tools.recording import Recording
     clean_rec = Recording(t=rec.t, x=clean, u=rec.u, state_names=rec.state_names,
                           input_names=rec.input_names, episode=rec.episode)
@@ -345,7 +345,7 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: 
     that under row["follow_up"] (same keys). spec_overrides: BallSpec fields to set
     (e.g. open_pair_tol=None, the model before issue 30)."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.ball_excitation import merge_changes
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import merge_changes
     from adaptive_c3.tools.recording import concat_recordings
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     kw.setdefault("params", ModelParams.from_scenario(scenario))
@@ -366,9 +366,9 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: 
 
 
 def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary, spec_overrides=None) -> dict:
-    from adaptive_c3.tools.diagnosis.concealed_data import score_diagnosis
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import score_diagnosis
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
-    from adaptive_c3.tools.diagnosis.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
     var = draw_variation(seed, vary)
     spec = ball_spec(scenario)
     for key, value in (spec_overrides or {}).items():
@@ -384,8 +384,8 @@ def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary, spec_overri
 
 
 def main(argv=None) -> int:
-    """python -m adaptive_c3.tools.diagnosis.concealed_ball_data [DRAWS] [FIRST_SEED] [--json FILE]"""
-    from adaptive_c3.tools.diagnosis.concealed_data import hit_rate_main
+    """python -m adaptive_c3.tools.diagnosis.harness.concealed_ball_data [DRAWS] [FIRST_SEED] [--json FILE]"""
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import hit_rate_main
     return hit_rate_main(argv, score_draw, 5000,
                          "hit rate of diagnose on concealed ball-rolling draws")
 

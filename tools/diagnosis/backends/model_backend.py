@@ -12,9 +12,9 @@ dt)`, and offers
                                  (next plant-layout state, contact impulses or counts)
 Effects are parameter changes: a scenario with some keys changed is another model.
 Backends:
-  lcs    the controller's Anitescu LCS (tools/diagnosis/rigid_model.py) - what C3 plans with
+  lcs    the controller's Anitescu LCS (tools/diagnosis/backends/rigid_model.py) - what C3 plans with
   drake  Drake's MultibodyPlant of the scenario's true world, SAP at a finer step
-         (tools/diagnosis/drake_backend.py) - what the user simulates
+         (tools/diagnosis/backends/drake_backend.py) - what the user simulates
 
 `Scorer` rolls one episode set out for lists of scenarios on worker processes (fork),
 each chunk of episodes one job (at least one per worker, at most CHUNK episodes), with
@@ -44,9 +44,9 @@ def make_model(name: str, scenario, dt: float):
     """The backend `name` of MODELS for this scenario at recording step dt (s)."""
     check_model(name)
     if name == "lcs":
-        from adaptive_c3.tools.diagnosis.rigid_model import RigidObjectModel
+        from adaptive_c3.tools.diagnosis.backends.rigid_model import RigidObjectModel
         return RigidObjectModel(scenario, dt)
-    from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator
+    from adaptive_c3.tools.diagnosis.backends.drake_backend import DrakeRigidSimulator
     return DrakeRigidSimulator(scenario, dt)
 
 

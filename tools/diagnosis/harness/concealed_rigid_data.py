@@ -1,7 +1,7 @@
 """Synthetic tosses with known physics, for checking the rigid-object diagnosis.
 
 Tosses of the scenario's box are simulated by the `drake` model backend
-(tools/diagnosis/drake_backend.py: Drake's SAP plant, 8 corner spheres on a half space, at
+(tools/diagnosis/backends/drake_backend.py: Drake's SAP plant, 8 corner spheres on a half space, at
 the recording's dt / 4) whose friction, table height or size differ from the scenario by
 known amounts; the diagnosis of the scenario's model (either backend) on them should name
 those effects with intervals around them.
@@ -47,7 +47,7 @@ def concealed_tosses(scenario, episodes: int, steps: int, seed: int, dt: float =
     """A recording of `episodes` tosses of `steps` + 1 samples from Drake SAP with the truth
     (friction / table_offset / size_offset), positions with noise_m Gaussian noise and
     velocities as the backward differences of the noisy positions (as the real data)."""
-    from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator
+    from adaptive_c3.tools.diagnosis.backends.drake_backend import DrakeRigidSimulator
     rng = np.random.default_rng(seed)
     sim = DrakeRigidSimulator(truth_scenario(scenario, **truth), dt)
     xs, ts, eps = [], [], []

@@ -3,7 +3,7 @@ nominal LCS, diagnosed LCS, Drake's default and diagnosed Drake, each rolled out
 the same starts, under every initial-state method (the effects are fitted once, with
 the `fit_start` method). The figures issue 30 asks for on the real cube tosses:
 
-    python -m adaptive_c3.tools.diagnosis.rigid_compare RECORDING SCENARIO OUT.json
+    python -m adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_compare RECORDING SCENARIO OUT.json
 
 Per model and start: the held-out summary (median / mean / p90 of the per-episode
 mean-over-time position error, % of size); per start: the paired per-episode drop from
@@ -19,9 +19,9 @@ import time
 import numpy as np
 
 from adaptive_c3.models.rigid_object import RigidObjectParams
-from adaptive_c3.tools.diagnosis.evaluate import recording_episodes
-from adaptive_c3.tools.diagnosis.initial_state import METHODS, initial_states
-from adaptive_c3.tools.diagnosis.rigid_diagnose import (diagnose_rigid, held_out_runs,
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import recording_episodes
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.initial_state import METHODS, initial_states
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import (diagnose_rigid, held_out_runs,
                                                         paired_gain)
 
 BOOTSTRAP = 2000

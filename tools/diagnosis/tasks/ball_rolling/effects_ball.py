@@ -40,7 +40,7 @@ import numpy as np
 
 from adaptive_c3.systems.contact.anitescu_lcs import OPEN_PAIR_TOL, open_pair_scale
 from adaptive_c3.systems.contact.lcp import solve_lcp
-from adaptive_c3.tools.diagnosis.effects import SystemSpec, delayed_inputs
+from adaptive_c3.tools.diagnosis.backends.effects import SystemSpec, delayed_inputs
 
 G = 9.81
 DIAG_DT = 0.01            # the step the recording must be sampled at, s
@@ -154,7 +154,7 @@ class BallSpec(SystemSpec):
     nuisance: tuple = (("actuator_delay", ""), ("calibration_offset", "ball_table"),
                        ("calibration_offset", "ee_ball"))
     # rolling resistance, drag and a constant force are also fitted and judged on the
-    # windows where the ball rolls or rests without the EE (tools/diagnosis/evidence.py)
+    # windows where the ball rolls or rests without the EE (tools/diagnosis/engine/evidence.py)
     free_ball: bool = True
     # The sizes that matter, (below, above) the effect's nominal value (by effect, or by
     # effect[target]): a `none` stays confident only when every listed effect's 95 %

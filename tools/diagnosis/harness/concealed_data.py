@@ -232,8 +232,8 @@ def _in_interval(selected, truth: Truth) -> bool:
 def clean_error_cut(rec, clean, result) -> tuple[float, float]:
     """Cross-validated rollout error of the original and the patched model against the
     noise-free truth (start states and targets without sensor noise), in NOISE_STD units."""
-    from adaptive_c3.tools.diagnosis.effects import rollout
-    from adaptive_c3.tools.diagnosis.locate import LAG, make_windows
+    from adaptive_c3.tools.diagnosis.backends.effects import rollout
+    from adaptive_c3.tools.diagnosis.engine.locate import LAG, make_windows
     clean_rec = Recording(t=rec.t, x=clean, u=rec.u, state_names=rec.state_names,
                           input_names=rec.input_names, episode=rec.episode)
     W = make_windows(clean_rec, result["horizon"])
@@ -254,7 +254,7 @@ def score_draw(seed: int, baseline: bool = True, **kw) -> dict:
     """Draw, diagnose (and run the baseline), and score against the concealed truth."""
     from adaptive_c3.scenarios.schema import load_scenario
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
-    from adaptive_c3.tools.diagnosis.effects import cartpole_spec
+    from adaptive_c3.tools.diagnosis.backends.effects import cartpole_spec
     rec, truth, clean = concealed_draw(seed, **kw)
     scenario, _ = load_scenario(DEFAULT_SCENARIO)
     spec = cartpole_spec(scenario)
@@ -283,7 +283,7 @@ def score_diagnosis(seed, rec, truth, clean, spec, result, baseline: bool = True
     against the noise-free data (error_cut(rec, clean, result) -> (before, after);
     default: this module's clean_error_cut), and (baseline) the SINDy baseline on the
     same draw."""
-    from adaptive_c3.tools.diagnosis.report import selected_rows
+    from adaptive_c3.tools.diagnosis.engine.report import selected_rows
     selected = selected_rows(result)
     before, after = (error_cut or clean_error_cut)(rec, clean, result)
     errs = result["errors"]
@@ -295,7 +295,7 @@ def score_diagnosis(seed, rec, truth, clean, spec, result, baseline: bool = True
                noisy_rollout_after=errs["after"]["rollout"]["normalised_rms"],
                seconds=result["seconds"])
     if baseline:
-        from adaptive_c3.tools.diagnosis.sindy_baseline import sindy_diagnose
+        from adaptive_c3.tools.diagnosis.harness.sindy_baseline import sindy_diagnose
         b = sindy_diagnose(rec, spec)
         row.update(baseline_selected=b["selected"], baseline_named=_named(b["selected"], truth),
                    baseline_in_interval=_in_interval(b["selected"], truth))
@@ -335,7 +335,7 @@ def hit_rate_main(argv, score, first_seed: int, description: str) -> int:
 
 
 def main(argv=None) -> int:
-    """python -m adaptive_c3.tools.diagnosis.concealed_data [DRAWS] [FIRST_SEED] [--json FILE]"""
+    """python -m adaptive_c3.tools.diagnosis.harness.concealed_data [DRAWS] [FIRST_SEED] [--json FILE]"""
     return hit_rate_main(argv, score_draw, 1000, "hit rate of diagnose on concealed draws")
 
 

@@ -8,8 +8,8 @@ from pathlib import Path
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.effects import CALIBRATION_TOLERANCE, EFFECTS, rollout
-from adaptive_c3.tools.diagnosis.locate import LAG
+from adaptive_c3.tools.diagnosis.backends.effects import CALIBRATION_TOLERANCE, EFFECTS, rollout
+from adaptive_c3.tools.diagnosis.engine.locate import LAG
 
 PLOT_ROLLOUT_STEPS = 40
 

@@ -1,6 +1,7 @@
 """Episode bookkeeping for recordings of free-flying bodies: find "twin" episodes (copies
 of one another up to a yaw rotation about world z and a horizontal shift) and split
-episodes into train / held-out sets so that twins never straddle the split.
+episodes into train / held-out sets so that twins never straddle the split; read a
+recording's episodes and score a rollout of one against it (the metrics of `evaluate`).
 
 Pure numpy/scipy. State columns are looked up by name: x, y, z, qw, qx, qy, qz (world from
 body), vx, vy, vz (world), wx, wy, wz (body frame).
@@ -10,7 +11,9 @@ from __future__ import annotations
 import numpy as np
 from scipy.spatial import cKDTree
 
-from adaptive_c3.models.rigid_object import quat_to_matrix
+from adaptive_c3.models.rigid_object import (RECORDING_STATE_NAMES, orientation_error_deg,
+                                             quat_to_matrix)
+from adaptive_c3.tools.user_input import UserError
 
 _NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "wx", "wy", "wz")
 
@@ -183,3 +186,51 @@ def split_episodes(episode_ids, held_out_fraction: float = 0.3, seed: int = 0,
             n_held += size
     held_set = set(held)
     return [e for e in ids if e not in held_set], sorted(held)
+
+
+METRICS = ("position_pct_mean", "position_pct_final", "orientation_deg_mean",
+           "orientation_deg_final")
+DT_TOLERANCE = 0.05      # relative spread of sample steps allowed within a recording
+
+
+def recording_episodes(rec, episode_ids=None) -> tuple[dict, float]:
+    """({episode id: (t [T], x [T, 13])}, dt) after checking the recording fits a
+    rigid-object model: state names, at least two rows per episode, a uniform step."""
+    if list(rec.state_names) != list(RECORDING_STATE_NAMES):
+        raise UserError(f"recording state names {list(rec.state_names)} do not match the "
+                        f"rigid object's {list(RECORDING_STATE_NAMES)}")
+    episodes = {int(e): idx for e, idx in rec.episodes()}
+    if episode_ids is not None:
+        missing = sorted(set(episode_ids) - set(episodes))
+        if missing:
+            raise UserError(f"episodes not in the recording: {missing[:10]}")
+        episodes = {e: episodes[e] for e in episode_ids}
+    steps = []
+    for e, idx in episodes.items():
+        if len(idx) < 2:
+            raise UserError(f"episode {e} has {len(idx)} row; an episode needs at least 2")
+        steps.append(np.diff(rec.t[idx]))
+    steps = np.concatenate(steps)
+    dt = float(np.median(steps))
+    if np.max(np.abs(steps - dt)) > DT_TOLERANCE * dt:
+        raise UserError(f"the recording's time step is not uniform (median {dt:g} s, "
+                        f"range {steps.min():g}-{steps.max():g} s); resample it first")
+    return {e: (rec.t[idx], rec.x[idx]) for e, idx in episodes.items()}, dt
+
+
+def episode_errors(x_model: np.ndarray, x_data: np.ndarray, size: float) -> dict:
+    """The per-episode metrics of METRICS for two [T, 13] recording-layout arrays."""
+    pos = np.linalg.norm(x_model[:, 0:3] - x_data[:, 0:3], axis=1) / size * 100.0
+    ori = orientation_error_deg(x_model[:, 3:7], x_data[:, 3:7])
+    return {"position_pct_mean": float(pos.mean()), "position_pct_final": float(pos[-1]),
+            "orientation_deg_mean": float(ori.mean()), "orientation_deg_final": float(ori[-1])}
+
+
+def summarise(per_episode: list[dict]) -> dict:
+    out = {"episodes": len(per_episode)}
+    for key in METRICS:
+        v = np.array([e[key] for e in per_episode])
+        out[f"{key}_median"] = float(np.median(v))
+        out[f"{key}_mean"] = float(np.mean(v))
+        out[f"{key}_p90"] = float(np.percentile(v, 90))
+    return out

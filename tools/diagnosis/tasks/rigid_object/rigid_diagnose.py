@@ -2,12 +2,12 @@
 of it disagree, which physics the model left out, and how much better the patched model
 predicts held-out episodes.
 
-The model is a backend of tools/diagnosis/model_backend.py (`--model`): `lcs`, the
+The model is a backend of tools/diagnosis/backends/model_backend.py (`--model`): `lcs`, the
 controller's Anitescu LCS (rigid_model.py), or `drake`, Drake's SAP plant of the
 scenario's true world (drake_backend.py). Each has its effect library
 (rigid_effects.py); effects are parameter changes, nuisances (compliance, calibration)
 are labelled as such.
-1. Split by episode (tools/diagnosis/episodes.py): held-out (never used to choose or fit
+1. Split by episode (tools/diagnosis/tasks/rigid_object/episodes.py): held-out (never used to choose or fit
    anything), and the rest into a fit part and a validation part; twin episodes (copies
    up to a yaw and a shift) always land on one side together.
 2. Locate: the model steps once from every recorded state of the fit episodes; samples
@@ -29,7 +29,7 @@ are labelled as such.
    with the chosen values in its keys.
 The score is the one `evaluate` reports: an episode's mean-over-time position error as
 % of the object's size, from a full open-loop rollout from the episode's start, estimated
-by tools/diagnosis/initial_state.py (`--initial-state`), the same for every model.
+by tools/diagnosis/tasks/rigid_object/initial_state.py (`--initial-state`), the same for every model.
 Rollouts run on `workers` processes.
 """
 from __future__ import annotations
@@ -39,11 +39,11 @@ import time
 import numpy as np
 
 from adaptive_c3.models.rigid_object import RigidObjectParams
-from adaptive_c3.tools.diagnosis.episodes import find_twins, split_episodes, twin_groups
-from adaptive_c3.tools.diagnosis.evaluate import (episode_errors, recording_episodes,
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import find_twins, split_episodes, twin_groups
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import (episode_errors, recording_episodes,
                                                   summarise)
-from adaptive_c3.tools.diagnosis.model_backend import FAILED_SCORE, Scorer, check_model
-from adaptive_c3.tools.diagnosis.rigid_effects import (EFFECTS, current_value, library,
+from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE, Scorer, check_model
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_effects import (EFFECTS, current_value, library,
                                                        not_identifiable, with_values)
 from adaptive_c3.tools.progress import Progress
 
@@ -145,11 +145,11 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
     rigid_effects.library(model). initial_state: how every rollout's start is estimated
     (initial_state.METHODS), the same for every model compared.
     baseline (model lcs): also Drake's SAP simulation on the held-out episodes, as it is
-    and with its knobs tuned on the same fit episodes (tools/diagnosis/drake_baseline.py).
+    and with its knobs tuned on the same fit episodes (tools/diagnosis/tasks/rigid_object/drake_baseline.py).
     effects: names from the library to try (default all)."""
-    from adaptive_c3.tools.diagnosis.initial_state import METHODS, initial_states
-    from adaptive_c3.tools.diagnosis.model_backend import make_model
-    from adaptive_c3.tools.diagnosis.rigid_locate import locate
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.initial_state import METHODS, initial_states
+    from adaptive_c3.tools.diagnosis.backends.model_backend import make_model
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_locate import locate
     from adaptive_c3.tools.user_input import UserError
     start = time.perf_counter()
     rng = np.random.default_rng(seed)
@@ -240,7 +240,7 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
     runs = [("nominal", model, scenario), ("diagnosed", model, patched)]
     drake_tuned = None
     if baseline and model == "lcs":
-        from adaptive_c3.tools.diagnosis.drake_baseline import tune_drake, with_drake
+        from adaptive_c3.tools.diagnosis.tasks.rigid_object.drake_baseline import tune_drake, with_drake
         drake_tuned, _ = tune_drake(scenario, [xs[e] for e in fit_ids], dt)
         runs += [("drake", "drake", scenario),
                  ("drake_tuned", "drake", with_drake(scenario, **drake_tuned))]
@@ -290,7 +290,7 @@ def cmd_diagnose_rigid(args, scenario, scenario_text: str, rec) -> int:
     """`adaptive-c3 diagnose` for a rigid_object scenario (called by diagnose.py)."""
     from pathlib import Path
 
-    from adaptive_c3.tools.diagnosis.rigid_report import write_report
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_report import write_report
     from adaptive_c3.tools.user_input import UserError
     if not 0 < args.held_out < 1:
         raise UserError(f"--held-out must be in (0, 1), got {args.held_out}")

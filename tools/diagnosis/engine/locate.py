@@ -21,7 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.optimize import nnls
 
-from adaptive_c3.tools.diagnosis.effects import MAX_DELAY_STEPS, Patched, apply_coulomb, rollout
+from adaptive_c3.tools.diagnosis.backends.effects import MAX_DELAY_STEPS, Patched, apply_coulomb, rollout
 
 LAG = MAX_DELAY_STEPS
 

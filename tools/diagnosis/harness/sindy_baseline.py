@@ -19,8 +19,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.effects import applicable_candidates, patch, sensitivity_columns
-from adaptive_c3.tools.diagnosis.locate import (LAG, estimate_noise, make_windows, one_step,
+from adaptive_c3.tools.diagnosis.backends.effects import applicable_candidates, patch, sensitivity_columns
+from adaptive_c3.tools.diagnosis.engine.locate import (LAG, estimate_noise, make_windows, one_step,
                                                prediction_floor)
 
 THRESHOLD = 0.1     # STLSQ threshold on standardised coefficients (noise-floor units)

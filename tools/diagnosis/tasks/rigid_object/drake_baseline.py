@@ -1,7 +1,7 @@
 """Tuning Drake's contact knobs to recordings: `tune_drake` fits the `drake` knobs of a
 rigid_object scenario (friction, point stiffness, relaxation time) to recorded episodes
 (coarse log grid, then Nelder-Mead) by the median over episodes of the mean position
-error. The simulator itself is tools/diagnosis/drake_backend.py's (the `drake` model
+error. The simulator itself is tools/diagnosis/backends/drake_backend.py's (the `drake` model
 backend); it is imported here under its old name for the callers of this module.
 At the cube's dt of 1/148 s the default point stiffness sits in SAP's near-rigid regime.
 """
@@ -13,8 +13,8 @@ import math
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.drake_backend import DrakeRigidSimulator  # noqa: F401
-from adaptive_c3.tools.diagnosis.model_backend import mean_position_error_pct
+from adaptive_c3.tools.diagnosis.backends.drake_backend import DrakeRigidSimulator  # noqa: F401
+from adaptive_c3.tools.diagnosis.backends.model_backend import mean_position_error_pct
 
 KNOBS = ("friction", "point_stiffness", "relaxation_time")
 # search ranges of the knobs (schema units), searched on a log scale

@@ -52,7 +52,7 @@ def phases(x_rec: np.ndarray, gap: np.ndarray) -> np.ndarray:
 def locate(model, episodes: dict, dt: float, g: float = 9.81, max_windows: int = 20) -> dict:
     """Mismatch windows, per-phase errors and contact-mode agreement of `model`
     (a RigidObjectModel) on {episode id: (t, x_rec)}."""
-    from adaptive_c3.tools.diagnosis.rigid_model import RigidModelError
+    from adaptive_c3.tools.diagnosis.backends.rigid_model import RigidModelError
     p = model.params
     rows = []
     for e, (t, x) in episodes.items():
