@@ -30,7 +30,7 @@ SEED = 5001                 # a contact_offset[ball_table] draw, with the second
 def _timed(rec, spec) -> tuple[float, float, str]:
     """(wall s of diagnose + report, of diagnose alone, selected label)."""
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
-    from adaptive_c3.tools.diagnosis.report import write_report
+    from adaptive_c3.tools.diagnosis.engine.report import write_report
     t0 = time.perf_counter()
     result = diagnose(rec, spec, progress=False)
     t1 = time.perf_counter()
@@ -43,8 +43,8 @@ def _timed(rec, spec) -> tuple[float, float, str]:
 
 def run_bench(quick: bool = False) -> list[dict]:
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.concealed_ball_data import concealed_draw
-    from adaptive_c3.tools.diagnosis.effects_ball import ModelParams, ball_spec
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams, ball_spec
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     rec, truth, _ = concealed_draw(SEED, params=ModelParams.from_scenario(scenario))
     runs = [_timed(rec, ball_spec(scenario)) for _ in range(1 if quick else 3)]
@@ -65,8 +65,8 @@ def run_bench(quick: bool = False) -> list[dict]:
 def _rigid_rows() -> list[dict]:
     """One rigid-object diagnosis per model backend on the same synthetic tosses."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.concealed_rigid_data import concealed_tosses
-    from adaptive_c3.tools.diagnosis.rigid_diagnose import diagnose_rigid
+    from adaptive_c3.tools.diagnosis.harness.concealed_rigid_data import concealed_tosses
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import diagnose_rigid
     scenario, _ = load_scenario(SCENARIO_DIR / "cube_toss.yaml")
     rec = concealed_tosses(scenario, episodes=24, steps=40, seed=5, friction=0.3)
     rows = []
