@@ -81,12 +81,18 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
                              relaxation_time: float | None = None,
                              friction: float | None = None,
                              hydroelastic_modulus: float | None = None,
-                             add_systems=None) -> RigidObjectPlant:
+                             add_systems=None, geometry: str = "corner_spheres"
+                             ) -> RigidObjectPlant:
     """The box + table plant. time_step 0: continuous (for the linearizer); > 0: SAP.
     point_stiffness (N/m) and relaxation_time (s, SAP's dissipation) None: Drake's defaults.
     hydroelastic_modulus (Pa): hydroelastic contact of a compliant box (instead of the corner
     spheres) against a rigid table (None: point contact). add_systems(builder, plant, body), if given, adds
-    systems (e.g. force elements) to the diagram before it is built."""
+    systems (e.g. force elements) to the diagram before it is built. geometry (point
+    contact): "corner_spheres" (eight, up to four contacts on a face) or "box" (one Box:
+    one contact point against the half space; SAP only, no contact_pairs for the
+    linearizer)."""
+    if geometry not in ("corner_spheres", "box"):
+        raise ValueError(f"geometry must be corner_spheres or box, got {geometry!r}")
     builder = DiagramBuilder()
     hydro = hydroelastic_modulus is not None
     config = MultibodyPlantConfig(time_step=float(time_step),
@@ -110,14 +116,16 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     table = plant.RegisterCollisionGeometry(
         plant.world_body(), RigidTransform([0.0, 0.0, params.table_height]), HalfSpace(),
         "table", table_props)
-    if hydro:   # a compliant box carries the contact (no corner spheres)
+    box = hydro or geometry == "box"
+    if box:     # a (compliant, if hydroelastic) box carries the contact: no corner spheres
         box_props = ProximityProperties(props)
-        AddCompliantHydroelasticProperties(0.5 * min(params.half_size),
-                                           float(hydroelastic_modulus), box_props)
+        if hydro:
+            AddCompliantHydroelasticProperties(0.5 * min(params.half_size),
+                                               float(hydroelastic_modulus), box_props)
         plant.RegisterCollisionGeometry(body, RigidTransform(),
                                         Box(*(2.0 * np.asarray(params.half_size))), "box",
                                         box_props)
-    for i, signs in enumerate(itertools.product((-1.0, 1.0), repeat=3) if not hydro else []):
+    for i, signs in enumerate(itertools.product((-1.0, 1.0), repeat=3) if not box else []):
         centre = np.asarray(signs) * (np.asarray(params.half_size) - r)
         corner = plant.RegisterCollisionGeometry(body, RigidTransform(centre), Sphere(r),
                                                  f"corner{i}", props)

@@ -58,6 +58,9 @@ class DrakeBaseline:
     viscous_drag: float = 0.0        # N s/m, force -c v on the body's centre (world)
     angular_drag: float = 0.0        # N m s, torque -c w (world)
     external_force: List[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])  # N, world
+    torsional_friction: float = 0.0  # m, torque per N of normal force against spin about the table normal
+    rolling_resistance: float = 0.0  # m, torque per N of normal force against rotation in the table plane
+    contact_geometry: str = "corner_spheres"   # point contact: "corner_spheres" or "box" (one contact point)
 
 
 @dc.dataclass
@@ -115,6 +118,11 @@ def validate_rigid_object(s: RigidObjectScenario) -> None:
     need(finite(d.angular_drag) and d.angular_drag >= 0, "drake.angular_drag must be >= 0")
     need(len(d.external_force) == 3 and all(finite(v) for v in d.external_force),
          f"drake.external_force must be 3 finite values (N), got {d.external_force}")
+    for key in ("torsional_friction", "rolling_resistance"):
+        v = getattr(d, key)
+        need(finite(v) and 0 <= v < 0.1, f"drake.{key} must be in [0, 0.1) m, got {v}")
+    need(d.contact_geometry in ("corner_spheres", "box"),
+         f"drake.contact_geometry must be corner_spheres or box, got {d.contact_geometry!r}")
 
 
 register_task("rigid_object", RigidObjectScenario, validate_rigid_object)

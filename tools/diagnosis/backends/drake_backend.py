@@ -2,11 +2,14 @@
 scenario's true-world description, replayed from recorded states (the body has no input).
 
 The plant is models/rigid_object.py's, discrete with SAP:
-- geometry: the box's eight corner spheres (radius contact.corner_radius, their surfaces
-  reaching the box's corners) against the table's half space at the (patched) table
-  height; mass, inertia and size from `body` and the geometry/inertia keys of `patch`
-  (table_offset, size_offset, mass_scale, inertia_scale; the LCS-only keys restitution,
-  r_comp, torsional_friction have no counterpart here);
+- geometry (drake.contact_geometry): `corner_spheres`, the box's eight corner spheres
+  (radius contact.corner_radius, their surfaces reaching the box's corners: up to four
+  point contacts on a face), or `box`, one Box (point contact gives it ONE contact point
+  against the table, so a cube on a face has no friction torque against spin), against
+  the table's half space at the (patched) table height; mass, inertia and size from
+  `body` and the geometry/inertia keys of `patch` (table_offset, size_offset, mass_scale,
+  inertia_scale; the LCS-only keys restitution, r_comp, torsional_friction have no
+  counterpart here);
 - contact: drake.contact_model, `point` (stiffness drake.point_stiffness N/m given to every
   geometry - Drake combines a pair's in series, so a corner-table pair gets half of it -,
   0 = Drake's default) or `hydroelastic` (a compliant box of modulus
@@ -15,8 +18,11 @@ The plant is models/rigid_object.py's, discrete with SAP:
   one; a static coefficient would be ignored, so there is one knob);
 - dissipation: SAP's linear Kelvin-Voigt term of relaxation time drake.relaxation_time
   (s), 0 = Drake's default (0.1 s). SAP ignores Hunt & Crossley dissipation;
-- forces the plant lacks (drake_forces.py, a system of the diagram): drake.viscous_drag
-  (N s/m), drake.angular_drag (N m s), drake.external_force (N, world);
+- forces the plant lacks (systems of the diagram into its applied_spatial_force input):
+  drake.viscous_drag (N s/m), drake.angular_drag (N m s), drake.external_force (N, world)
+  (drake_forces.py); drake.torsional_friction and drake.rolling_resistance (m: torque per
+  newton of the table's normal force, against spin about the normal and rotation about
+  axes in the table plane; contact_torques.py);
 - time step: drake.time_step, 0 = the recording's dt / SUBSTEPS. Samples at multiples of
   dt (zero-order hold: the state after the last discrete update at or before k dt).
 
@@ -30,15 +36,39 @@ the scores use, are not shifted.
 from __future__ import annotations
 
 import numpy as np
+from pydrake.multibody.plant import ExternallyAppliedSpatialForceMultiplexer
 from pydrake.systems.analysis import Simulator
 
 from adaptive_c3.models.drake_warnings import silence_half_space_deformable_warning
 from adaptive_c3.models.rigid_object import (RigidObjectParams, build_rigid_object_plant,
                                              plant_state, recording_state)
+from adaptive_c3.tools.diagnosis.backends.contact_torques import add_contact_torques
 from adaptive_c3.tools.diagnosis.backends.drake_forces import add_body_forces, has_forces
 
 SUBSTEPS = 4             # SAP updates per recording step when drake.time_step is 0
 GRAVITY = 9.81           # m/s^2, Drake's default
+
+
+def force_systems(d, inertia_diag, time_step: float):
+    """The add_systems hook of build_rigid_object_plant for the scenario's drake section d:
+    the force elements it asks for (none: None), their outputs summed into the plant's
+    applied_spatial_force input."""
+    forces = (d.viscous_drag, d.angular_drag, list(d.external_force))
+    hooks = ([add_body_forces(*forces)] if has_forces(*forces) else []) + (
+        [add_contact_torques(d.torsional_friction, d.rolling_resistance, inertia_diag,
+                             time_step)] if d.torsional_friction or d.rolling_resistance else [])
+    if not hooks:
+        return None
+
+    def add(builder, plant, body):
+        ports = [hook(builder, plant, body) for hook in hooks]
+        if len(ports) > 1:
+            mux = builder.AddSystem(ExternallyAppliedSpatialForceMultiplexer(len(ports)))
+            for i, port in enumerate(ports):
+                builder.Connect(port, mux.get_input_port(i))
+            ports = [mux.get_output_port(0)]
+        builder.Connect(ports[0], plant.get_applied_spatial_force_input_port())
+    return add
 
 
 class DrakeRigidSimulator:
@@ -61,13 +91,13 @@ class DrakeRigidSimulator:
         self.friction = float(d.friction) if d.friction >= 0 else self.params.friction
         self.point_stiffness = float(d.point_stiffness) if d.point_stiffness > 0 else None
         self.relaxation_time = float(d.relaxation_time) if d.relaxation_time > 0 else None
-        forces = (d.viscous_drag, d.angular_drag, list(d.external_force))
         self.model = build_rigid_object_plant(
             self.params, self.time_step, point_stiffness=self.point_stiffness,
             relaxation_time=self.relaxation_time, friction=self.friction,
             hydroelastic_modulus=(float(d.hydroelastic_modulus)
                                   if d.contact_model == "hydroelastic" else None),
-            add_systems=add_body_forces(*forces) if has_forces(*forces) else None)
+            geometry=d.contact_geometry,
+            add_systems=force_systems(d, self.params.inertia_diag, self.time_step))
         self.plant = self.model.plant
         self.context = self.model.diagram.CreateDefaultContext()
         self.plant_context = self.plant.GetMyMutableContextFromRoot(self.context)

@@ -53,11 +53,12 @@ class BodyForces(LeafSystem):
 
 
 def add_body_forces(viscous_drag: float, angular_drag: float, external_force):
-    """An add_systems hook for build_rigid_object_plant: BodyForces wired state -> forces."""
+    """A hook (builder, plant, body) -> the BodyForces output port, wired from the plant's
+    state (the caller connects the output: drake_backend.py)."""
     def add(builder, plant, body):
         forces = builder.AddSystem(BodyForces(body.index(), viscous_drag, angular_drag,
                                               external_force))
         forces.set_name("body_forces")
         builder.Connect(plant.get_state_output_port(), forces.get_input_port(0))
-        builder.Connect(forces.get_output_port(0), plant.get_applied_spatial_force_input_port())
+        return forces.get_output_port(0)
     return add

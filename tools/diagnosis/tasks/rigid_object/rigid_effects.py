@@ -85,6 +85,14 @@ DRAKE_EFFECTS = (
     RigidEffect("angular_drag", "drake.angular_drag", (0.0, 1e-4, 3e-4, 1e-3, 3e-3),
                 "N m s", "a viscous drag on the body's spin (added as a force element)",
                 lcs=f"{NO_LCS}: the LCS has no velocity-dependent torque term"),
+    RigidEffect("torsional_friction", "drake.torsional_friction", (0.0, 1e-3, 3e-3, 1e-2, 3e-2),
+                "m", "contact patches resist spinning about the table normal beyond what the "
+                "point contacts' friction gives (torsional friction: torque per newton of "
+                "normal force; added as a force element)", lcs="patch.torsional_friction"),
+    RigidEffect("rolling_resistance", "drake.rolling_resistance", (0.0, 1e-3, 3e-3, 1e-2),
+                "m", "the body resists rotating about axes in the table plane while pressed "
+                "on it (rolling resistance: torque per newton of normal force; added as a "
+                "force element)", lcs=f"{NO_LCS}: the LCS has no rolling resistance term"),
     RigidEffect("external_force_z", "drake.external_force[2]", (-0.3, -0.1, 0.0, 0.1, 0.3),
                 "N", "a constant vertical force on the body (a magnet, a tether, a wrong "
                 "gravity; added as a force element)",
@@ -105,8 +113,6 @@ DRAKE_NOT_IDENTIFIABLE = {
                                  "which is tried)",
     "sensor_delay": "the tosses have no input: a delay only shifts time, which the fitted "
                     "initial state absorbs",
-    "rolling_resistance, torsional_friction": "need the contact force in the force element; "
-                                              "not in the drake backend yet",
 }
 
 
