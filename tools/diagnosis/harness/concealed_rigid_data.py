@@ -32,11 +32,16 @@ def random_toss_start(rng) -> np.ndarray:
     return x
 
 
-def truth_scenario(scenario, friction=None, table_offset=0.0, size_offset=0.0):
-    """The scenario Drake simulates as the truth (the model's scenario is not changed)."""
+def truth_scenario(scenario, friction=None, table_offset=0.0, size_offset=0.0, **drake):
+    """The scenario Drake simulates as the truth (the model's scenario is not changed);
+    drake: other fields of its `drake` section (e.g. torsional_friction=0.02)."""
     s = copy.deepcopy(scenario)
     if friction is not None:
         s.drake.friction = float(friction)
+    for key, value in drake.items():
+        if not hasattr(s.drake, key):
+            raise ValueError(f"no drake.{key} in the scenario")
+        setattr(s.drake, key, value)
     s.patch.table_offset += float(table_offset)
     s.patch.size_offset += float(size_offset)
     return s
@@ -45,7 +50,7 @@ def truth_scenario(scenario, friction=None, table_offset=0.0, size_offset=0.0):
 def concealed_tosses(scenario, episodes: int, steps: int, seed: int, dt: float = 1.0 / 148,
                      noise_m: float = 2e-4, **truth) -> Recording:
     """A recording of `episodes` tosses of `steps` + 1 samples from Drake SAP with the truth
-    (friction / table_offset / size_offset), positions with noise_m Gaussian noise and
+    (truth_scenario's friction / table_offset / size_offset / drake fields), positions with noise_m Gaussian noise and
     velocities as the backward differences of the noisy positions (as the real data)."""
     from adaptive_c3.tools.diagnosis.backends.drake_backend import DrakeRigidSimulator
     rng = np.random.default_rng(seed)

@@ -18,7 +18,11 @@ are labelled as such.
    off-ballistic).
 3. Effects: each is fitted alone on the fit episodes by a grid over its value (coarse,
    then FINE_POINTS between the best value's neighbours; the objective is the 20 %
-   trimmed mean of the per-episode errors), refined by a parabola, with a 95% interval from bootstrapping episodes. Greedy forward
+   trimmed mean of the per-episode errors), refined by a parabola, with a 95% interval
+   from bootstrapping episodes. A two-parameter effect (`refit`, e.g. contact stiffness
+   with friction: softer contact changes how far a landing cube slides) is scored at
+   each value with its refit key at REFIT_FACTORS times its current value, keeping the
+   best (a profile; no fine points); the refitted value goes with it. Greedy forward
    selection: the effect that lowers the fit error most is kept only if it also lowers
    the validation episodes' error, with a bootstrap 95% interval of the paired
    improvement above zero and at least MIN_GAIN relative; then the next one is tried
@@ -55,6 +59,7 @@ MIN_GAIN = 0.02          # relative validation improvement an effect must bring
 BOOTSTRAP = 2000
 TRIM = 0.2               # fraction of episodes cut at each end by the fit objective
 FINE_POINTS = 4          # values added between the coarse grid's best point's neighbours
+REFIT_FACTORS = (0.94, 0.97, 1.0, 1.03)   # a two-parameter effect's refit key, x its value
 
 
 def refine_minimum(grid, means, integer: bool = False) -> float:
@@ -97,6 +102,23 @@ def _refine_grid(grid, S: np.ndarray, score) -> tuple[list, np.ndarray]:
     values = list(grid) + fine
     order = np.argsort(values)
     return [float(values[k]) for k in order], merged[order]
+
+
+def profile_scores(score, base, eff, values) -> tuple[np.ndarray, list]:
+    """([len(values), episodes] scores, [{key: value}] per row) of effect eff at each of
+    values on top of the scenario base (score(scenarios) -> [scenarios, episodes]). An
+    effect with a `refit` key (a two-parameter effect) is scored at each value with that
+    key at REFIT_FACTORS times its current value, and keeps the best (objective) of them:
+    the rows are that profile, the dicts the refitted values."""
+    if not eff.refit:
+        return score([with_values(base, {eff.key: v}) for v in values]), [{}] * len(values)
+    companions = [current_value(base, eff.refit) * f for f in REFIT_FACTORS]
+    S = score([with_values(base, {eff.key: v, eff.refit: c})
+               for v in values for c in companions])
+    S = S.reshape(len(values), len(companions), -1)
+    pick = np.argmin(objective(S), axis=1)
+    return (S[np.arange(len(values)), pick],
+            [{eff.refit: float(companions[k])} for k in pick])
 
 
 def bootstrap_interval(grid, S: np.ndarray, rng, integer: bool = False) -> tuple[float, float]:
@@ -179,7 +201,8 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
         return Scorer([xs[e] for e in ids], dt, size, workers, model, [x0s[e] for e in ids])
 
     fit_score, val_score = scorer(fit_ids), scorer(parts["validation"])
-    total = sum(len(e.grid) + 2 + FINE_POINTS for e in chosen_lib) * MAX_EFFECTS + 2
+    total = sum((len(e.grid) + 2) * (len(REFIT_FACTORS) if e.refit else 1) + FINE_POINTS
+                for e in chosen_lib) * MAX_EFFECTS + 2
     bar = Progress(total, f"diagnose ({model}): fitting effects", unit="fits", enabled=progress)
     done = [0]
 
@@ -201,35 +224,39 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
             for eff in remaining:
                 here = current_value(base, eff.key)
                 grid = sorted(set(eff.grid) | ({here} if here is not None else set()))
-                S = fit_score([with_values(base, {eff.key: v}) for v in grid])
-                tick(len(grid))
-                if not eff.integer:     # coarse to fine: FINE_POINTS between the best's neighbours
-                    grid, S = _refine_grid(grid, S, lambda vs: fit_score(
+                per = len(REFIT_FACTORS) if eff.refit else 1     # rollouts of a value
+                S, with_ = profile_scores(fit_score, base, eff, grid)
+                tick(len(grid) * per)
+                if not eff.integer and not eff.refit:   # coarse to fine: FINE_POINTS between
+                    grid, S = _refine_grid(grid, S, lambda vs: fit_score(   # the best's neighbours
                         [with_values(base, {eff.key: v}) for v in vs]))
+                    with_ = [{}] * len(grid)
                     tick(FINE_POINTS)
                 means = objective(S)
                 best = refine_minimum(grid, means, eff.integer)
-                S_best = fit_score([with_values(base, {eff.key: best})])[0]
-                tick()
+                (S_best,), (best_with,) = profile_scores(fit_score, base, eff, [best])
+                tick(per)
                 if objective(S_best) > means.min():      # the objective is not a parabola there
-                    best, S_best = float(grid[int(np.argmin(means))]), S[int(np.argmin(means))]
+                    i = int(np.argmin(means))
+                    best, S_best, best_with = float(grid[i]), S[i], with_[i]
                 cands.append(dict(name=eff.name, key=eff.key, unit=eff.unit, physics=eff.physics,
-                                  kind=eff.kind, lcs=eff.lcs,
+                                  kind=eff.kind, lcs=eff.lcs, refitted=best_with,
                                   value=best, ci95=list(bootstrap_interval(grid, S, rng, eff.integer)),
                                   grid=list(map(float, grid)), grid_fit_mean=means.tolist(),
                                   fit_mean=float(objective(S_best)),
                                   fit_gain_relative=float(1 - objective(S_best) / objective(S0))))
             cands.sort(key=lambda c: c["fit_mean"])
             top = cands[0]
-            V1 = val_score([with_values(base, {top["key"]: top["value"]})])[0]
+            top_values = {top["key"]: top["value"], **top["refitted"]}
+            V1 = val_score([with_values(base, top_values)])[0]
             gain = paired_gain(V0, V1, rng)
             accepted = gain["ci95"][0] > 0 and gain["relative"] >= MIN_GAIN
             rounds.append(dict(candidates=cands, tried=top["name"], validation_gain=gain,
                                accepted=bool(accepted)))
             if not accepted:
                 break
-            chosen[top["key"]] = top["value"]
-            S0, V0 = fit_score([with_values(base, {top["key"]: top["value"]})])[0], V1
+            chosen.update(top_values)
+            S0, V0 = fit_score([with_values(base, top_values)])[0], V1
             remaining = [e for e in remaining if e.key != top["key"]]
     finally:
         bar.close()

@@ -27,6 +27,7 @@ class RigidEffect:
     integer: bool = False
     kind: str = "physics"          # or "nuisance"
     lcs: str = ""                  # drake effects: the LCS key, or "no LCS counterpart: why"
+    refit: str = ""                # a second key re-fitted with it (a two-parameter effect)
 
 
 EFFECTS = (
@@ -71,13 +72,15 @@ DRAKE_EFFECTS = (
     RigidEffect("size_offset", "patch.size_offset", (-2e-3, -1e-3, 0.0, 1e-3, 2e-3),
                 "m", "the object's contact geometry is larger or smaller than modelled",
                 lcs="patch.size_offset"),
-    RigidEffect("point_stiffness", "drake.point_stiffness", (1e3, 2e3, 4e3, 1e4, 3e4),
-                "N/m", "contact is softer than Drake's default point contact (compliance)",
-                kind="nuisance", lcs=f"{NO_LCS}: the LCS is rigid (contact.eps_c is a "
-                "regulariser, not a stiffness)"),
+    RigidEffect("point_stiffness", "drake.point_stiffness", (1e3, 2e3, 5e3, 1e4, 3e4),
+                "N/m", "contact is softer than Drake's default point contact (compliance; "
+                "friction re-fitted with it)", kind="nuisance", refit="drake.friction",
+                lcs=f"{NO_LCS}: the LCS is rigid (contact.eps_c is a regulariser, not a "
+                "stiffness)"),
     RigidEffect("relaxation_time", "drake.relaxation_time", (3e-3, 1e-2, 3e-2, 0.1, 0.3),
-                "s", "contact dissipates differently from Drake's default (SAP relaxation time)",
-                kind="nuisance", lcs=f"{NO_LCS}: the LCS's impacts are perfectly inelastic"),
+                "s", "contact dissipates differently from Drake's default (SAP relaxation "
+                "time; friction re-fitted with it)", kind="nuisance", refit="drake.friction",
+                lcs=f"{NO_LCS}: the LCS's impacts are perfectly inelastic"),
     RigidEffect("viscous_drag", "drake.viscous_drag", (0.0, 0.02, 0.05, 0.1, 0.2),
                 "N s/m", "a viscous drag on the body's velocity (air or a tether; Drake's "
                 "plant has none: added as a force element)",

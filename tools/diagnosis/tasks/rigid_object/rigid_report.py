@@ -20,9 +20,14 @@ def _sure(gain: dict) -> str:
 MODEL_WORDS = {"lcs": "the controller's rigid LCS", "drake": "Drake's SAP simulation"}
 
 
+def _refitted(s: dict) -> str:
+    """', with KEY re-fitted to VALUE' for a two-parameter effect, else ''."""
+    return "".join(f", with {k} re-fitted to {v:.4g}" for k, v in (s.get("refitted") or {}).items())
+
+
 def _effect_words(s: dict) -> str:
     g = s["validation_gain"]
-    return (f"{s['physics']} ({s['name']} = {s['value']:.4g} {s['unit']}, 95 % "
+    return (f"{s['physics']} ({s['name']} = {s['value']:.4g} {s['unit']}{_refitted(s)}, 95 % "
             f"interval [{s['ci95'][0]:.4g}, {s['ci95'][1]:.4g}]; {_sure(g)}: validation "
             f"error down {100 * g['relative']:.0f} %, 95 % interval of the gain "
             f"[{g['ci95'][0]:.2f}, {g['ci95'][1]:.2f}] % of size)")
@@ -36,6 +41,9 @@ def lcs_meaning(selected: list) -> list[str]:
             out.append(f"{s['name']}: LCS patch {s['lcs']} = {s['value']:.4g}")
         else:
             out.append(f"{s['name']}: {s.get('lcs') or 'no LCS counterpart'}")
+        if "drake.friction" in (s.get("refitted") or {}):
+            out.append(f"{s['name']}'s re-fitted friction: LCS patch contact.friction = "
+                       f"{s['refitted']['drake.friction']:.4g}")
     return out
 
 
@@ -98,11 +106,12 @@ def report_dict(result: dict) -> dict:
                         "up to a yaw and a shift) kept on one side"),
         mismatch=result["located"],
         rounds=[dict(tried=r["tried"], accepted=r["accepted"], validation_gain=r["validation_gain"],
-                     candidates=[{k: c[k] for k in ("name", "key", "value", "ci95", "unit",
-                                                    "fit_mean", "fit_gain_relative", "physics")}
+                     candidates=[{k: c.get(k) for k in ("name", "key", "value", "ci95", "unit",
+                                                        "refitted", "fit_mean",
+                                                        "fit_gain_relative", "physics")}
                                  for c in r["candidates"]]) for r in result["rounds"]],
-        selected=[{k: s.get(k) for k in ("name", "key", "value", "ci95", "unit", "physics",
-                                         "kind", "lcs", "validation_gain")}
+        selected=[{k: s.get(k) for k in ("name", "key", "value", "ci95", "unit", "refitted",
+                                         "physics", "kind", "lcs", "validation_gain")}
                   for s in result["selected"]],
         lcs_meaning=(lcs_meaning(result["selected"]) if result.get("model") == "drake" else None),
         held_out_gain=result.get("held_out_gain"),
