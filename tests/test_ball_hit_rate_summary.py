@@ -1,6 +1,6 @@
 """ball_hit_rate's summary reports the answers separately: an ambiguous verdict is never
 counted as right (issue 30)."""
-from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import answer_line, summarise
+from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import ANSWERS, answer, answer_line, summarise
 
 
 def _row(truth, verdict, named, in_set=None, in_ci=False):
@@ -24,3 +24,57 @@ def test_summary_separates_confident_and_ambiguous_answers():
     rows[3]["follow_up"] = _row("viscous_damping", "named", True, in_ci=True)
     f = summarise(rows)["after_follow_up"]
     assert (f["confident_right"], f["ambiguous_without_truth"], f["follow_ups"]) == (3, 0, 1)
+
+
+def _draw(truth, value, target, selected, verdict, ambiguous=()):
+    """A scored row as concealed_ball_data._score leaves it before the size rule."""
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import Truth, _named
+    t = Truth(truth, target, value, "")
+    amb = list(ambiguous)
+    row = dict(truth=t.as_dict(), selected=[dict(name=n, target=g) for n, g in selected],
+               verdict=verdict, ambiguous=amb, in_interval=False, excess_cut=1.0,
+               clean_cut=1.0, in_ambiguous_set=(f"{truth}[{target}]" in amb) if amb else None)
+    row["named"] = _named(row["selected"], t)
+    return t, row
+
+
+def test_an_effect_too_small_to_matter_is_right_as_none():
+    """A concealed effect below its size that matters (BallSpec.relevant_size) is scored
+    right when the answer is `none`, and an ambiguous set holding `none` holds the truth;
+    above that size `none` stays wrong. The four answers sum to the draws."""
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import apply_size_rule
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
+    none = [("none", "")]
+    cases = [  # (truth, value, target, selected, verdict, ambiguous) -> answer
+        (("mass_scale", 1.1, "ball", none, "none"), "confident_right"),
+        (("mass_scale", 1.3, "ball", none, "none"), "confident_wrong"),
+        (("mass_scale", 0.75, "ball", [("mass_scale", "ball")], "named"), "confident_right"),
+        (("external_force", -0.007, "ball_x", none, "ambiguous",
+          ["none", "mass_scale[ball]"]), "ambiguous_with_truth"),
+        (("external_force", -0.02, "ball_x", none, "ambiguous",
+          ["none", "mass_scale[ball]"]), "ambiguous_without_truth"),
+        (("friction_coefficient", 0.6, "ee_ball", none, "none"), "confident_right"),
+        (("friction_coefficient", 0.45, "ee_ball", none, "none"), "confident_wrong"),
+        (("contact_offset", 8e-4, "ee_ball", [("contact_offset", "ball_table")], "named"),
+         "confident_wrong"),
+        (("viscous_damping", 0.05, "ball", [("viscous_damping", "ball")], "named"),
+         "confident_right"),
+        (("none", 0.0, "", [("rolling_resistance", "ball_table")], "named"), "confident_wrong"),
+    ]
+    rows = []
+    for args, want in cases:
+        t, row = _draw(*args)
+        apply_size_rule(row, t, spec)
+        row["favoured"] = row["named"] and row["verdict"] != "ambiguous"
+        assert answer(row) == want, (args, row)
+        rows.append(row)
+    s = summarise(rows)
+    assert sum(s[a] for a in ANSWERS) == s["draws"] == len(cases)
+    assert (s["confident_right"], s["confident_wrong"], s["ambiguous_with_truth"],
+            s["ambiguous_without_truth"]) == (4, 4, 1, 1)
+    assert s["below_size_draws"] == 5 and s["below_size"]["confident_right"] == 3
+    # named effect draws (interval, excess cut): the answers that name the true effect
+    assert s["named_effect_count"] == 2
+    assert s["per_effect"]["mass_scale[ball]"]["confident_right"] == 2

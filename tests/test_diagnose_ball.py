@@ -167,10 +167,14 @@ def ball_hit_rate(tmp_path_factory):
     """>= 30 random draws (seeds 5000..) + clean draws, scored once for the module.
     The original single-engine harness (vary=False); the varied one is in
     test_diagnose_ball_verdict.py."""
+    from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import answer_line, summarise
     from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
     from adaptive_c3.tools.diagnosis.harness.concealed_data import hit_rates
     rows = [score_draw(s, vary=False) for s in range(5000, 5032)]
-    summary = hit_rates(rows)
+    # the separate answers (confident right / wrong, ambiguous with / without the truth)
+    # beside the SINDy baseline's rates
+    summary = dict(hit_rates(rows), **summarise(rows))
+    print(answer_line(summary))
     out = (os.environ.get("ADAPTIVE_C3_BALL_HIT_RATE_JSON")
            or str(tmp_path_factory.mktemp("hit_rate") / "hit_rate.json"))
     with open(out, "w") as f:
@@ -181,7 +185,9 @@ def ball_hit_rate(tmp_path_factory):
 
 @pytest.mark.slow
 def test_ball_hit_rate_slow(ball_hit_rate):
+    from adaptive_c3.tools.diagnosis.harness.ball_hit_rate import ANSWERS
     assert ball_hit_rate["draws"] >= 30
+    assert sum(ball_hit_rate[a] for a in ANSWERS) == ball_hit_rate["draws"], ball_hit_rate
     assert ball_hit_rate["none_on_clean"] >= 0.75, ball_hit_rate
 
 

@@ -2,15 +2,19 @@
 
     python -m adaptive_c3.tools.diagnosis.harness.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
         [--follow-up] [--no-open-pair-gate]
+    python -m adaptive_c3.tools.diagnosis.harness.ball_hit_rate --merge A.json B.json [--out DIR]
+        (one summary and per-effect table over the rows of several runs)
 
 Each draw (tools/diagnosis/harness/concealed_ball_data.py, with the second-engine variation) is
 diagnosed and scored:
   named          the concealed effect (or none) is the one selected, i.e. named first
   favoured       ... and the verdict is `named` (not ambiguous)
   confident_right / confident_wrong / ambiguous_with_truth / ambiguous_without_truth
-                 counts of the separate answers (ambiguous is never counted as right);
-                 truth_in_interval: count of draws with the truth in the 95 % interval
-  confident_wrong  draws whose verdict is not ambiguous and whose answer is wrong
+                 counts of the separate answers (ambiguous is never counted as right; they
+                 sum to the draws); truth_in_interval: count of the named effect draws
+                 (the answer is the true effect) with the truth in the 95 % interval
+  matters        the effective truth reaches the size that matters (BallSpec.relevant_size);
+                 below it `none` is a right answer (below_size: those draws' answers)
   in_interval    named, and the effective truth inside the reported 95% interval
   ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
   excess cut     held-out rollout excess-over-noise (noisy data) before / after
@@ -44,12 +48,30 @@ def summarise(rows) -> dict:
     return out
 
 
+ANSWERS = ("confident_right", "confident_wrong", "ambiguous_with_truth",
+           "ambiguous_without_truth")
+
+
+def answer(r) -> str:
+    """The draw's answer category (ANSWERS; an ambiguous verdict is never right). A draw
+    below the size that matters is right with `none` (concealed_ball_data.apply_size_rule)."""
+    if r["verdict"] == "ambiguous":
+        return "ambiguous_with_truth" if r["in_ambiguous_set"] else "ambiguous_without_truth"
+    return "confident_right" if r["named"] else "confident_wrong"
+
+
+def _counts(rows) -> dict:
+    return {k: sum(answer(r) == k for r in rows) for k in ANSWERS}
+
+
 def _summary(rows) -> dict:
     def rate(rs, key):
         return float(np.mean([bool(r[key]) for r in rs])) if rs else None
     eff = [r for r in rows if r["truth"]["name"] != "none"]
     clean = [r for r in rows if r["truth"]["name"] == "none"]
-    named_eff = [r for r in eff if r["named"]]
+    # named effect draws: the answer is the true effect (not a right `none` below size)
+    named_eff = [r for r in eff if r["named"] and not r.get("answered_none", False)]
+    below = [r for r in eff if not r.get("matters", True)]
     amb = [r for r in rows if r["verdict"] == "ambiguous"]
     per = {}
     for r in rows:
@@ -59,14 +81,10 @@ def _summary(rows) -> dict:
     return dict(
         draws=len(rows),
         # the separate answers (an ambiguous verdict is never counted as right)
-        confident_right=count(lambda r: r["verdict"] != "ambiguous" and r["named"]),
-        confident_wrong=count(lambda r: r["verdict"] != "ambiguous" and not r["named"]),
-        ambiguous_with_truth=count(lambda r: r["verdict"] == "ambiguous"
-                                   and r["in_ambiguous_set"]),
-        ambiguous_without_truth=count(lambda r: r["verdict"] == "ambiguous"
-                                      and not r["in_ambiguous_set"]),
+        **_counts(rows),
         named_first=count(lambda r: r["named"]),
-        truth_in_interval=count(lambda r: r["in_interval"]),
+        truth_in_interval=sum(bool(r["in_interval"]) for r in named_eff),
+        below_size_draws=len(below), below_size=_counts(below),
         named=rate(rows, "named"), named_effect_draws=rate(eff, "named"),
         favoured=rate(rows, "favoured"), none_on_clean=rate(clean, "named"),
         clean_draws=len(clean), coverage=rate(named_eff, "in_interval"),
@@ -76,11 +94,16 @@ def _summary(rows) -> dict:
         if named_eff else None,
         median_clean_cut=float(np.median([r["clean_cut"] for r in named_eff]))
         if named_eff else None,
-        per_effect={k: dict(draws=len(v), named=rate(v, "named"),
+        per_effect={k: dict(draws=len(v), below_size=sum(not r.get("matters", True) for r in v),
+                            **_counts(v), named=rate(v, "named"),
                             ambiguous=sum(r["verdict"] == "ambiguous" for r in v),
                             truth_in_ambiguous=rate([r for r in v if r["verdict"] ==
                                                      "ambiguous"], "in_ambiguous_set"),
-                            in_interval=rate(v, "in_interval")) for k, v in sorted(per.items())},
+                            in_interval=rate(v, "in_interval"),
+                            truth_in_interval=sum(bool(r["in_interval"]) for r in v
+                                                  if r in named_eff),
+                            named_effect=sum(r in named_eff for r in v))
+                    for k, v in sorted(per.items())},
         targets=TARGETS)
 
 
@@ -92,7 +115,12 @@ def answer_line(summary) -> str:
              f"ambiguous with the truth {summary['ambiguous_with_truth']}/{n}",
              f"ambiguous without {summary['ambiguous_without_truth']}/{n}",
              f"named first {summary['named_first']}/{n}",
-             f"truth in the 95 % interval {summary['truth_in_interval']}/{n}"]
+             f"truth in the 95 % interval {summary['truth_in_interval']}/"
+             f"{summary['named_effect_count']} named effect draws"]
+    if summary.get("below_size_draws"):
+        b = summary["below_size"]
+        parts.append(f"{summary['below_size_draws']} draws below the size that matters "
+                     f"(confident right {b['confident_right']}, wrong {b['confident_wrong']})")
     if summary.get("median_excess_cut") is not None:
         parts.append(f"median excess-over-noise cut {summary['median_excess_cut']:.2f}x "
                      "(named effect draws)")
@@ -143,18 +171,58 @@ def run(draws: int, first_seed: int, out: Path, **kw) -> dict:
         (out / "ball_hit_rate.json").write_text(
             json.dumps(dict(summary=summary, rows=rows), indent=1, default=float))
     plot(summary, out / "ball_hit_rate.png")
+    print_summary(summary)
+    return summary
+
+
+def print_summary(summary) -> None:
     print("one recording: " + answer_line(summary), flush=True)
+    print("\n".join(effect_table(summary)), flush=True)
     if "after_follow_up" in summary:
-        print(f"after {summary['after_follow_up']['follow_ups']} follow-up recordings: "
-              + answer_line(summary["after_follow_up"]), flush=True)
+        f = summary["after_follow_up"]
+        print(f"after {f['follow_ups']} follow-up recordings: " + answer_line(f), flush=True)
+        print("\n".join(effect_table(f)), flush=True)
+
+
+def effect_table(summary) -> list:
+    """Markdown rows per effect: draws (below the size that matters), the four answers,
+    truth in the 95 % interval of the named effect draws."""
+    out = ["| effect | draws (below size) | confident right | confident wrong | ambiguous "
+           "with truth | ambiguous without | truth in 95 % CI / named |",
+           "|---|---|---|---|---|---|---|"]
+    for k, v in list(summary["per_effect"].items()) + [("all", dict(
+            summary, below_size=summary["below_size_draws"],
+            named_effect=summary["named_effect_count"]))]:
+        out.append(f"| {k} | {v['draws']} ({v['below_size']}) | "
+                   + " | ".join(str(v[a]) for a in ANSWERS)
+                   + f" | {v['truth_in_interval']}/{v['named_effect']} |")
+    return out
+
+
+def merge(paths, out: Path) -> dict:
+    """One summary over the rows of several ball_hit_rate.json files (e.g. two halves
+    of an evaluation run side by side)."""
+    rows = [r for p in paths for r in json.loads(Path(p).read_text())["rows"]]
+    summary = summarise(rows)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "ball_hit_rate.json").write_text(
+        json.dumps(dict(summary=summary, rows=rows, merged=[str(p) for p in paths]),
+                   indent=1, default=float))
+    print_summary(summary)
     return summary
 
 
 def _answer(r) -> str:
     sel = "+".join(_label(x["name"], x.get("target", "")) for x in r["selected"])
-    return (f"{sel} ({r['verdict']}{': ' + ', '.join(r['ambiguous']) if r['ambiguous'] else ''})"
-            f" named={r['named']} in_ci={r['in_interval']} excess cut={r['excess_cut']:.3g} "
-            f"({r['seconds']:.1f}s)")
+    est = ""
+    if r["selected"] and r["selected"][0].get("params"):
+        p = r["selected"][0]["params"][0]
+        est = f" {p['value']:.3g} [{p['ci95'][0]:.3g}, {p['ci95'][1]:.3g}]"
+    below = "" if r.get("matters", True) else " [truth below the size that matters]"
+    return (f"{sel}{est} ({r['verdict']}"
+            f"{': ' + ', '.join(r['ambiguous']) if r['ambiguous'] else ''}) -> {answer(r)}"
+            f"{below} named={r['named']} in_ci={r['in_interval']} "
+            f"excess cut={r['excess_cut']:.3g} ({r['seconds']:.1f}s)")
 
 
 def main(argv=None) -> int:
@@ -168,7 +236,17 @@ def main(argv=None) -> int:
     ap.add_argument("--no-open-pair-gate", action="store_true",
                     help="diagnose with Anitescu's relaxed cone on open pairs too (the model "
                          "before issue 30: BallSpec.open_pair_tol = None)")
+    ap.add_argument("--merge", nargs="+", metavar="JSON",
+                    help="summarise the rows of these ball_hit_rate.json files together")
     args = ap.parse_args(argv)
+    if args.merge:
+        missing = [p for p in args.merge if not Path(p).is_file()]
+        if missing:
+            import sys
+            print(f"ball_hit_rate: no such file: {missing[0]}", file=sys.stderr)
+            return 2
+        merge(args.merge, Path(args.out))
+        return 0
     kw = dict(spec_overrides=dict(open_pair_tol=None)) if args.no_open_pair_gate else {}
     print(json.dumps(run(args.draws, args.first_seed, Path(args.out),
                          follow_up=args.follow_up, **kw), indent=1))

@@ -21,8 +21,14 @@ Second-engine variation (every draw, `vary=True`, from its own random stream so 
 effect draw is unchanged): what real data has and a single simulator hides - contact
 point stiffness log-uniform 2e4-3e5 N/m and SAP relaxation time 0.5-5 ms (the model is
 rigid and undamped), a sensor delay of 0-8 ms (the recorded state lags the applied
-force: linear interpolation between samples), and a table height off by +-0.3 mm (for
-a contact_offset[ball_table] draw the effective truth is value - table_dz).
+force: linear interpolation between samples), a table height off by +-0.3 mm and (on
+the wide-size seeds, below) EE and ball radii off by +-0.3 mm each; the effective truth
+of a contact_offset draw includes them (effective_truth_value).
+
+Sizes (SIZES): the seeds from 12000 on draw sizes that straddle every size that matters
+(BallSpec.relevant_size: a draw below it is scored right when the answer is `none`,
+apply_size_rule); the earlier development seeds (and the retired evaluation seeds
+31000-31020) keep the narrow sizes and the variation their tests and figures were made with.
 
 Excitation (the push gait: tools/diagnosis/tasks/ball_rolling/ball_excitation.py; `follow_up=` records
 again under a gait change the report proposed): a 100 Hz controller (zero-order-held
@@ -74,20 +80,38 @@ UNITS = {"contact_offset": "m", "friction_coefficient": "1", "rolling_resistance
          "mass_scale": "1", "external_force": "N", "viscous_damping": "N*s/m"}
 
 
-def draw_effect(rng, name=None, target=None) -> Truth:
+# Drawn sizes (mass: two uniform ranges, one below and one above 1; offsets and forces
+# take a random sign). "narrow": the sizes before issue 30, all far past the sizes that
+# matter; "wide": they straddle them (offsets 1 mm, mass +-20 %, forces 0.01 N, drag
+# 0.1 N*s/m, rolling resistance 0.5 mm, EE-ball mu 0.5).
+SIZES = {
+    "narrow": dict(contact_offset=(0.002, 0.0035), friction_coefficient=(0.1, 0.3),
+                   rolling_resistance=(0.001, 0.004), mass_scale=(0.5, 0.75, 1.4, 2.0),
+                   external_force=(0.02, 0.06), viscous_damping=(0.08, 0.3)),
+    "wide": dict(contact_offset=(0.0003, 0.0035), friction_coefficient=(0.1, 0.7),
+                 rolling_resistance=(0.0002, 0.004), mass_scale=(0.6, 0.9, 1.1, 1.8),
+                 external_force=(0.005, 0.06), viscous_damping=(0.03, 0.3)),
+}
+WIDE_FROM_SEED = 12000
+RETIRED_NARROW = range(31000, 31021)    # the first evaluation set, quoted with narrow sizes
+RADIUS_ERROR = 3e-4                     # m, +- on the EE and the ball radius (wide seeds)
+
+
+def wide_sizes(seed: int) -> bool:
+    """Whether a seed draws the wide sizes and the radius errors (module doc)."""
+    return seed >= WIDE_FROM_SEED and seed not in RETIRED_NARROW
+
+
+def draw_effect(rng, name=None, target=None, sizes: str = "wide") -> Truth:
     if name is None:
         name, target = DRAWABLE[rng.integers(len(DRAWABLE))]
     if name == "none":
         return Truth("none", "", 0.0, "")
     sign = 1.0 if rng.random() < 0.5 else -1.0
-    value = {
-        "contact_offset": lambda: sign * rng.uniform(0.002, 0.0035),
-        "friction_coefficient": lambda: rng.uniform(0.1, 0.3),
-        "rolling_resistance": lambda: rng.uniform(0.001, 0.004),
-        "mass_scale": lambda: _either(rng, 0.5, 0.75, 1.4, 2.0),
-        "external_force": lambda: sign * rng.uniform(0.02, 0.06),
-        "viscous_damping": lambda: rng.uniform(0.08, 0.3),
-    }[name]()
+    r = SIZES[sizes][name]
+    value = _either(rng, *r) if len(r) == 4 else rng.uniform(*r)
+    if name in ("contact_offset", "external_force"):
+        value *= sign
     return Truth(name, target or "", float(value), UNITS[name])
 
 
@@ -98,6 +122,8 @@ class Variation:
     relaxation_time: float = 2e-3   # s, SAP dissipation
     sensor_delay: float = 0.0       # s, the recorded state lags by this
     table_dz: float = 0.0           # m, table top height error
+    ee_dr: float = 0.0              # m, true EE tip radius - the model's
+    ball_dr: float = 0.0            # m, true ball radius - the model's
 
     def as_dict(self):
         return asdict(self)
@@ -107,16 +133,23 @@ def draw_variation(seed: int, vary: bool = True) -> Variation:
     if not vary:
         return Variation()
     rng = np.random.default_rng([seed, 13])
-    return Variation(stiffness=float(np.exp(rng.uniform(np.log(2e4), np.log(3e5)))),
-                     relaxation_time=float(rng.uniform(5e-4, 5e-3)),
-                     sensor_delay=float(rng.uniform(0.0, 0.008)),
-                     table_dz=float(rng.uniform(-3e-4, 3e-4)))
+    var = dict(stiffness=float(np.exp(rng.uniform(np.log(2e4), np.log(3e5)))),
+               relaxation_time=float(rng.uniform(5e-4, 5e-3)),
+               sensor_delay=float(rng.uniform(0.0, 0.008)),
+               table_dz=float(rng.uniform(-3e-4, 3e-4)))
+    if wide_sizes(seed):
+        var.update(ee_dr=float(rng.uniform(-RADIUS_ERROR, RADIUS_ERROR)),
+                   ball_dr=float(rng.uniform(-RADIUS_ERROR, RADIUS_ERROR)))
+    return Variation(**var)
 
 
 def effective_truth_value(truth: Truth, var: Variation) -> float:
-    """The value the diagnosis should find: a table-height draw adds to the table error."""
+    """The value the diagnosis should find: an offset draw adds to the table and radius
+    errors (larger radii close the EE-ball gap and lift the ball off the table)."""
     if truth.name == "contact_offset" and truth.target == "ball_table":
-        return truth.value - var.table_dz
+        return truth.value - var.table_dz - var.ball_dr
+    if truth.name == "contact_offset" and truth.target == "ee_ball":
+        return truth.value - var.ee_dr - var.ball_dr
     return truth.value
 
 
@@ -134,10 +167,11 @@ class TruePlant:
         from pydrake.systems.framework import DiagramBuilder
         self.truth, self.p = truth, p
         t = truth
-        ee_r, ball_m, table_z = p.ee_radius, p.ball_mass, var.table_dz
+        ee_r, ball_m, table_z = p.ee_radius + var.ee_dr, p.ball_mass, var.table_dz
+        ball_r = p.ball_radius + var.ball_dr
         mu = {"ee": p.mu, "ball": p.mu, "table": p.mu}
         if t.name == "contact_offset" and t.target == "ee_ball":
-            ee_r = p.ee_radius - t.value          # gap larger by value
+            ee_r -= t.value                        # gap larger by value
         if t.name == "contact_offset" and t.target == "ball_table":
             table_z -= t.value                     # model sees the ball `value` too high
         if t.name == "mass_scale":
@@ -145,7 +179,7 @@ class TruePlant:
         if t.name == "friction_coefficient":       # Drake combines 2ab/(a+b); ball stays mu
             other = "ee" if t.target == "ee_ball" else "table"
             mu[other] = t.value * p.mu / (2 * p.mu - t.value)
-        self.ee_r, self.ball_m, self.table_z = ee_r, ball_m, table_z
+        self.ee_r, self.ball_r, self.ball_m, self.table_z = ee_r, ball_r, ball_m, table_z
         builder = DiagramBuilder()
         plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
             time_step=SIM_DT, discrete_contact_approximation="sap", contact_model="point"),
@@ -167,8 +201,8 @@ class TruePlant:
         plant.RegisterCollisionGeometry(ee, RigidTransform(), Sphere(ee_r), "ee", props(mu["ee"]))
         binst = plant.AddModelInstance("ball")
         ball = plant.AddRigidBody("ball", binst,
-                                  SpatialInertia.SolidSphereWithMass(ball_m, p.ball_radius))
-        plant.RegisterCollisionGeometry(ball, RigidTransform(), Sphere(p.ball_radius), "ball",
+                                  SpatialInertia.SolidSphereWithMass(ball_m, ball_r))
+        plant.RegisterCollisionGeometry(ball, RigidTransform(), Sphere(ball_r), "ball",
                                         props(mu["ball"]))
         plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform([0, 0, table_z - 0.05]),
                                         Box(2.0, 2.0, 0.1), "table", props(mu["table"]))
@@ -199,7 +233,7 @@ class TruePlant:
         elif t.name == "viscous_damping":
             f[3:] = -t.value * x[16:19]
         elif t.name == "rolling_resistance":
-            on_table = x[9] - self.table_z < self.p.ball_radius + 1e-3
+            on_table = x[9] - self.table_z < self.ball_r + 1e-3
             w = x[13:15]
             if on_table:
                 f[:2] = -t.value * self.ball_m * G * w / max(np.linalg.norm(w), OMEGA0_TRUE)
@@ -247,7 +281,7 @@ def make_recording(truth: Truth, seed: int, episodes: int | None = None,
     ts, xs, us, eps, clean = [], [], [], [], []
     for e in range(episodes):
         center = np.array([0.55, 0.0]) + rng.uniform(-0.05, 0.05, 2)
-        ball = np.array([*(center + rng.uniform(-0.03, 0.03, 2)), p.ball_radius + plant.table_z])
+        ball = np.array([*(center + rng.uniform(-0.03, 0.03, 2)), plant.ball_r + plant.table_z])
         x = np.zeros(19)
         x[3:7] = _random_quat(rng)
         x[7:10] = ball
@@ -286,7 +320,7 @@ def concealed_draw(seed: int, name=None, target=None, vary: bool = True,
     follow_up: a gait change (ball_excitation.Excitation fields, as the report proposes):
     a second recording of the same truth and variation under that gait, new noise."""
     rng = np.random.default_rng([seed, 11])
-    truth = draw_effect(rng, name, target)
+    truth = draw_effect(rng, name, target, "wide" if wide_sizes(seed) else "narrow")
     variation = kw.pop("variation", None) or draw_variation(seed, vary)
     rec_seed = int(rng.integers(2**31))
     if follow_up is not None:
@@ -321,6 +355,36 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
 
 def label(name, target) -> str:
     return f"{name}[{target}]" if target else name
+
+
+def matters(truth: Truth, spec) -> bool:
+    """Whether the (effective) truth reaches the size that matters of its effect
+    (spec.relevant_size: (below, above) the nominal value, as the verdict's `none` rule
+    reads it); `none`, and an effect without a listed size, always count as mattering."""
+    from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+    if truth.name == "none":
+        return True
+    c = Candidate(truth.name, truth.target)
+    sizes = getattr(spec, "relevant_size", None) or {}
+    size = sizes.get(c.label(), sizes.get(c.name))
+    if size is None:
+        return True
+    dev = truth.value - float(c.nominal(spec)[0])
+    return bool(-dev >= size[0] or dev >= size[1])
+
+
+def apply_size_rule(row, truth: Truth, spec) -> dict:
+    """Score a draw whose effect is too small to matter: the answer `none` is right there
+    (naming the true effect stays right), and an ambiguous set holding `none` holds a
+    right answer. Sets row["matters"] and row["answered_none"]; the interval is only
+    scored on draws that name the true effect (in_interval is unchanged)."""
+    row["matters"] = matters(truth, spec)
+    row["answered_none"] = bool(row["selected"]) and row["selected"][0]["name"] == "none"
+    if not row["matters"]:
+        row["named"] = bool(row["named"] or row["answered_none"])
+        if row.get("ambiguous"):
+            row["in_ambiguous_set"] = bool(row["in_ambiguous_set"] or "none" in row["ambiguous"])
+    return row
 
 
 def judged_fields(result, truth) -> dict:
@@ -378,6 +442,7 @@ def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary, spec_overri
     row = score_diagnosis(seed, rec, eff, clean, spec, result, baseline,
                           error_cut=clean_error_cut)
     row.update(variation=var.as_dict(), drawn_value=truth.value, **judged_fields(result, eff))
+    apply_size_rule(row, eff, spec)
     row["favoured"] = bool(row["named"] and row["verdict"] != "ambiguous")
     row["proposals"] = (result.get("judged") or {}).get("separating_excitation", [])
     return row
