@@ -36,7 +36,8 @@ def test_library_has_the_issue_names_and_says_what_does_not_apply(spec):
     labels = {c.label() for c in cands}
     assert {"contact_offset[right_wall]", "viscous_damping[pole_theta]", "mass_scale[cart]",
             "actuator_delay", "r_comp[all_pairs]"} <= labels
-    assert set(skipped) == {"friction_coefficient", "rolling_resistance"}
+    assert set(skipped) == {"friction_coefficient", "rolling_resistance", "contact_dissipation",
+                            "torsional_friction"}
 
 
 def test_unpatched_batch_rollout_is_the_lcs(spec):

@@ -7,7 +7,10 @@ DIR/report.json, DIR/report.html (+ PNG plots), DIR/patched_scenario.yaml.
 
 Tasks: cartpole (a constant LCS) and ball_rolling (the controller model's Anitescu LCS
 linearised at every recording sample, tools/diagnosis/tasks/ball_rolling/effects_ball.py; the recording
-must be sampled at 100 Hz). rigid_object scenarios (free bodies tossed onto a table, many
+must be sampled at 100 Hz); with `--model drake` ball rolling is diagnosed against Drake's
+plant of the scenario's world instead (tasks/ball_rolling/drake_ball.py: the same engine,
+effects in Drake's terms, the patch written to the scenario's `drake:` section and the
+report saying what the finding means for the controller's LCS). rigid_object scenarios (free bodies tossed onto a table, many
 episodes, full open-loop rollouts) are diagnosed by tools/diagnosis/tasks/rigid_object/rigid_diagnose.py.
 
 Ball rolling, besides (tools/diagnosis/engine/evidence.py): a sensor delay is fitted first and
@@ -92,11 +95,21 @@ def _parse_effects(raw, where):
     return out
 
 
-def model_spec(scenario):
+def model_spec(scenario, model: str = "lcs", workers: int = 2):
+    """The diagnosis view of the scenario's model: `lcs` (the controller's LCS) or `drake`
+    (ball rolling: Drake's plant of the scenario's world, tasks/ball_rolling/drake_ball.py)."""
+    from adaptive_c3.tools.diagnosis.backends.model_backend import check_model
     task = getattr(scenario, "task", "cartpole")
+    check_model(model)
     if task == "cartpole":
+        if model != "lcs":
+            raise _user_error(f"--model {model}: cartpole scenarios are diagnosed with the lcs "
+                              f"model only (--model drake: ball_rolling and rigid_object)")
         return cartpole_spec(scenario)
     if task == "ball_rolling":
+        if model == "drake":
+            from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball import drake_ball_spec
+            return drake_ball_spec(scenario, workers=workers)
         from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
         return ball_spec(scenario)
     raise _user_error(f"diagnose supports the cartpole and ball_rolling tasks, not '{task}'")
@@ -248,28 +261,45 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
              for k in prob.folds}
-    inside1, insideH = in_windows(W1, windows, rec), in_windows(WH, windows, rec)
+    es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
+    E1, e1 = W1.take(np.arange(len(W1)) % es == 0), fold1[::es]
+    EH, eH = WH.take(np.arange(len(WH)) % es == 0), foldH[::es]
+    inside1, insideH = in_windows(E1, windows, rec), in_windows(EH, windows, rec)
     errors = {}
     for tag, models in (("before", before), ("after", after)):
         errors[tag] = dict(
-            one_step=error_table(spec, models, W1, fold1, floor),
-            rollout=error_table(spec, models, WH, foldH, floor),
+            one_step=error_table(spec, models, E1, e1, floor),
+            rollout=error_table(spec, models, EH, eH, floor),
             inside_mismatch_windows=dict(
-                one_step=error_table(spec, models, W1, fold1, floor, inside1),
-                rollout=error_table(spec, models, WH, foldH, floor, insideH)))
+                one_step=error_table(spec, models, E1, e1, floor, inside1),
+                rollout=error_table(spec, models, EH, eH, floor, insideH)))
     bar.close()
     return dict(spec=spec, base=base, sigma=sigma, floor=floor, windows=windows, steps=steps,
                 W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
                 P0=P0, P_user=P_user, P1=P1, P1_folds=after, errors=errors,
                 contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
-                nuisance=nuisance, fits_free=fits_free,
+                nuisance=nuisance, fits_free=fits_free, **backend_fields(spec, chosen),
                 seconds=time.perf_counter() - start)
+
+
+def backend_fields(spec, chosen) -> dict:
+    """The result's model_backend, model_description and, for a backend other than the
+    LCS, lcs_counterpart: [{effect, lcs}] per chosen effect (spec.lcs_counterpart)."""
+    name = getattr(spec, "model", "lcs")
+    out = dict(model_backend=name, model_description=getattr(spec, "description", ""))
+    if hasattr(spec, "lcs_counterpart"):
+        out["lcs_counterpart"] = [dict(effect=c.label(), lcs=spec.lcs_counterpart(c.label()))
+                                  for c in (chosen.cands if chosen is not None else ())]
+    return out
 
 
 def patched_scenario_text(scenario_text: str, spec, base, chosen) -> tuple[str, list]:
     """The scenario YAML with the chosen effects in it; returns (text, notes)."""
     data = yaml.safe_load(scenario_text) or {}
+    if hasattr(spec, "patch_scenario"):      # e.g. the drake backend: its `drake:` section
+        notes = spec.patch_scenario(data, chosen.effects(spec) if chosen else [])
+        return yaml.safe_dump(data, sort_keys=False), notes
     data.pop("effects", None)
     effects = [(c, np.asarray(p, float)) for c, p in base]
     notes, intervals = [], {}
@@ -325,21 +355,26 @@ def cmd_diagnose(args) -> int:
     if scenario.task == "rigid_object":
         from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import cmd_diagnose_rigid
         return cmd_diagnose_rigid(args, scenario, text, rec)
-    if (getattr(args, "model", None) or "lcs") != "lcs":
-        from adaptive_c3.tools.user_input import UserError
-        raise UserError(f"--model {args.model}: only the lcs model is diagnosed for "
-                        f"task {scenario.task} so far (--model drake: rigid_object scenarios)")
-    spec = model_spec(scenario)
+    spec = model_spec(scenario, getattr(args, "model", None) or "lcs",
+                      workers=getattr(args, "workers", 2) or 2)
     check_recording(rec, spec)
     out = Path(args.out) if args.out else Path("runs") / (
         f"diagnose-{Path(args.recording).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     out.mkdir(parents=True, exist_ok=True)
-    result = diagnose(rec, spec, base)
-    patched, notes = patched_scenario_text(text, spec, base, result["chosen"])
-    (out / "patched_scenario.yaml").write_text(
-        "# written by adaptive-c3 diagnose; " + "; ".join(notes or ["no effect selected"])
-        + "\n" + patched)
-    report = write_report(out, rec, result, scenario_notes=notes)
+    try:
+        result = diagnose(rec, spec, base)
+        patched, notes = patched_scenario_text(text, spec, base, result["chosen"])
+        (out / "patched_scenario.yaml").write_text(
+            "# written by adaptive-c3 diagnose; " + "; ".join(notes or ["no effect selected"])
+            + "\n" + patched)
+        report = write_report(out, rec, result, scenario_notes=notes)
+    finally:
+        if hasattr(spec, "close"):        # the drake backend's worker processes
+            spec.close()
+    if report["model_backend"] != "lcs":
+        print(f"model diagnosed: {report['model_backend']}; for the controller's LCS: "
+              + ("; ".join(f"{c['effect']} -> {c['lcs']}" for c in report["lcs_counterpart"])
+                 or "nothing to change"))
     sel = ", ".join(s["name"] + (f"[{s['target']}]" if s.get("target") else "")
                     for s in report["selected"])
     print(f"selected: {sel}; held-out rollout error (noise-floor units) "

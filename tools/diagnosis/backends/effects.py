@@ -47,6 +47,7 @@ class SystemSpec:
     body_names: tuple = ()
     rebuild: Callable | None = None   # rebuild({body: scale}) -> (Lcs, minv)
     stiffness_groups: dict = field(default_factory=dict)  # target -> (pair idx, k0 N/m)
+    relaxation_groups: dict = field(default_factory=dict)  # target -> (pair idx, tau0 s)
     friction_pairs: tuple = ()    # pairs with tangential friction (friction_coefficient)
     rolling_pairs: tuple = ()     # pairs where rolling resistance applies
     not_applicable: dict = field(default_factory=dict)   # effect name -> reason
@@ -108,6 +109,10 @@ def _k0(spec, target):
     return spec.stiffness_groups[target][1]
 
 
+def _tau0(spec, target):
+    return spec.relaxation_groups[target][1]
+
+
 EFFECTS = {e.name: e for e in [
     EffectDef("contact_offset", "pair", ("offset",), lambda s, t: "m", _zero,
               lambda s, t: (-0.3, 0.3), lambda s, t: np.linspace(-0.2, 0.2, 41),
@@ -119,10 +124,19 @@ EFFECTS = {e.name: e for e in [
     EffectDef("contact_damping", "group", ("damping",), lambda s, t: "N*s/m", _zero,
               lambda s, t: (0.0, 100.0), lambda s, t: np.linspace(0.0, 30.0, 31),
               description="the contact force has a term proportional to penetration rate"),
+    EffectDef("contact_dissipation", "group", ("relaxation_time",), lambda s, t: "s", _tau0,
+              lambda s, t: (_tau0(s, t) / 20, _tau0(s, t) * 20),
+              lambda s, t: _tau0(s, t) * np.geomspace(0.2, 5.0, 25),
+              description="the contact dissipates faster or slower than modelled (a "
+                          "compliant model's relaxation time, e.g. SAP's)"),
     EffectDef("friction_coefficient", "pair", ("mu",), lambda s, t: "1", _one,
               lambda s, t: (0.0, 3.0), lambda s, t: np.linspace(0.1, 2.0, 20)),
     EffectDef("rolling_resistance", "pair", ("coefficient",), lambda s, t: "m", _zero,
               lambda s, t: (0.0, 0.05), lambda s, t: np.linspace(0.0, 0.01, 11)),
+    EffectDef("torsional_friction", "pair", ("coefficient",), lambda s, t: "m", _zero,
+              lambda s, t: (0.0, 0.05), lambda s, t: np.linspace(0.0, 0.01, 11),
+              description="a torque opposing the spin about the contact normal, coefficient "
+                          "x the body's weight"),
     EffectDef("viscous_damping", "coord", ("coefficient",), _coord_unit(True, True), _zero,
               _vd_bounds, _vd_grid, description="a force opposing and proportional to velocity"),
     EffectDef("coulomb_friction", "coord", ("force",), _coord_unit(True, False), _zero,
@@ -412,4 +426,7 @@ def cartpole_spec(scenario) -> SystemSpec:
         not_applicable={
             "friction_coefficient": "the cart-pole's wall contacts are frictionless "
                                     "(normal force only); no tangential force to scale",
-            "rolling_resistance": "nothing rolls in the cart-pole model"})
+            "rolling_resistance": "nothing rolls in the cart-pole model",
+            "contact_dissipation": "the wall contacts are springs; their damping is "
+                                   "contact_damping",
+            "torsional_friction": "the cart-pole's wall contacts are frictionless"})

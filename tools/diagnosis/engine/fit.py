@@ -171,7 +171,8 @@ def fit_candidates(prob: Problem, cands, init=None, ci: bool = True, W=None) -> 
     init = np.clip(np.asarray(init, float), lo + 1e-12, hi - 1e-12)
     scale = np.maximum(np.abs(hi - lo) / 20.0, 1e-6)
     ftol, xtol = getattr(spec, "fit_tolerance", (1e-10, 1e-9))
-    theta, r, Jt = levenberg_marquardt(fun, init, lo, hi, scale, ftol=ftol, xtol=xtol)
+    theta, r, Jt = levenberg_marquardt(fun, init, lo, hi, scale, ftol=ftol, xtol=xtol,
+                                       jac_step=getattr(spec, "jacobian_step", 1e-4))
     lin = (r, Jt, lo, hi, (len(W), prob.horizon, -1))
     if not ci:
         return Fit(tuple(cands), theta, np.zeros((len(theta), 2)), np.zeros(len(theta)),
@@ -286,11 +287,12 @@ def add_to_interval(fit: Fit, allowance: np.ndarray) -> Fit:
     return fit
 
 
-def _jacobian(fun, x, r, lo, hi, scale):
-    """The transposed Jacobian [p, N] (rows contiguous: p x p products stay cheap)."""
+def _jacobian(fun, x, r, lo, hi, scale, jac_step: float = 1e-4):
+    """The transposed Jacobian [p, N] (rows contiguous: p x p products stay cheap), by
+    forward differences of jac_step * scale."""
     Jt = np.empty((len(x), r.size))
     for j in range(len(x)):
-        h = 1e-4 * scale[j]
+        h = jac_step * scale[j]
         if x[j] + h > hi[j]:
             h = -h
         xp = x.copy()
@@ -300,15 +302,17 @@ def _jacobian(fun, x, r, lo, hi, scale):
 
 
 def levenberg_marquardt(fun, x0, lo, hi, scale, max_iter: int = 30, ftol: float = 1e-10,
-                        xtol: float = 1e-9):
+                        xtol: float = 1e-9, jac_step: float = 1e-4):
     """Bounded (projected) Levenberg-Marquardt for a few parameters and many residuals.
     Returns (x, residuals at x, Jacobian at x). scipy's least_squares spends most of its
     time on n_residuals-sized linear algebra; here every step is a p x p solve. Stops when
-    the cost falls by <= ftol (relative) or no parameter moves by more than xtol * scale."""
+    the cost falls by <= ftol (relative) or no parameter moves by more than xtol * scale.
+    jac_step: the forward-difference step, relative to scale (a model solved to a
+    tolerance, e.g. Drake's SAP, needs a larger one than the LCS's closed forms)."""
     x = np.asarray(x0, float).copy()
     r = fun(x)
     cost, mu = r @ r, 1e-3
-    Jt = _jacobian(fun, x, r, lo, hi, scale)
+    Jt = _jacobian(fun, x, r, lo, hi, scale, jac_step)
     for _ in range(max_iter):
         g, A = Jt @ r, Jt @ Jt.T
         diag = np.maximum(np.diag(A), 1e-12 * (np.trace(A) + 1e-30))
@@ -326,7 +330,7 @@ def levenberg_marquardt(fun, x0, lo, hi, scale, max_iter: int = 30, ftol: float 
             break
         done = (cost - cn) <= ftol * cost or np.all(np.abs(xn - x) <= xtol * scale)
         x, r, cost, mu = xn, rn, cn, max(mu / 4.0, 1e-9)
-        Jt = _jacobian(fun, x, r, lo, hi, scale)
+        Jt = _jacobian(fun, x, r, lo, hi, scale, jac_step)
         if done:
             break
     return x, r, Jt

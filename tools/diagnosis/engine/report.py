@@ -143,6 +143,18 @@ def _not_excluded(member) -> str:
 GAIT_NOTE = " (separating_excitation[].excitation: the push gait's fields to change)"
 
 
+def backend_summary(report) -> str:
+    """Which model was diagnosed and, for another backend than the LCS, what each finding
+    means for the controller's LCS (an empty string for an lcs diagnosis)."""
+    if report.get("model_backend", "lcs") == "lcs":
+        return ""
+    text = f"Model diagnosed: {report['model_backend']} ({report['model_description']}). "
+    if report["lcs_counterpart"]:
+        text += "For the controller's LCS: " + "; ".join(
+            f"{c['effect']} -> {c['lcs']}" for c in report["lcs_counterpart"]) + ". "
+    return text
+
+
 def plain_summary(result, selected) -> str:
     eb, ea = result["error_before"], result["error_after"]
     rb, ra = eb["rollout"]["normalised_rms"], ea["rollout"]["normalised_rms"]
@@ -329,7 +341,10 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
     spec = result["spec"]
     selected = selected_rows(result)
     report = dict(
-        model=spec.name, horizon_steps=result["horizon"], dt=spec.dt, split=result["split"],
+        model=spec.name, model_backend=result.get("model_backend", "lcs"),
+        model_description=result.get("model_description", ""),
+        lcs_counterpart=result.get("lcs_counterpart", []),
+        horizon_steps=result["horizon"], dt=spec.dt, split=result["split"],
         recording=dict(samples=int(len(rec.t)), episodes=len(list(rec.episodes()))),
         scenario_effects=[dict(name=c.name, target=c.target, value=[float(v) for v in p])
                           for c, p in result["base"]
@@ -350,7 +365,8 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
         seconds=float(result["seconds"]))
     result["error_before"], result["error_after"] = report["error_before"], report["error_after"]
     result["mismatch_windows"] = result["windows"]
-    report["summary"] = plain_summary(result, selected) + ambiguity_summary(report)
+    report["summary"] = (backend_summary(report) + plain_summary(result, selected)
+                         + ambiguity_summary(report))
     (out / "report.json").write_text(json.dumps(report, indent=1))
     files = _plots(out, rec, result)
     _write_html(out / "report.html", report, files)

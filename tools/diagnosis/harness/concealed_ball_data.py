@@ -3,8 +3,9 @@
 The data is made by a DIFFERENT simulator than the model being diagnosed: Drake's
 discrete MultibodyPlant with SAP and compliant point contact at 1 kHz (the model is the
 rigid Anitescu LCS of the controller model at the 100 Hz recording step). The plant is
-built here (EE sphere on three prismatic joints, a free ball, a table) so that every
-physical parameter can differ from the model. ONE effect (or none) is drawn with its
+tasks/ball_rolling/ball_plant.py's (EE sphere on three prismatic joints, a free ball, a
+table; the `drake` backend replays recordings through the same builder), with every
+physical parameter free to differ from the model. ONE effect (or none) is drawn with its
 size from a seed the diagnosis never sees:
 
   contact_offset[ee_ball]       the EE tip sphere is smaller (+) / larger (-): EE-ball gap shift, m
@@ -158,13 +159,9 @@ class TruePlant:
     """EE + ball + table in Drake (SAP, point contact, 1 kHz) with the concealed effect."""
 
     def __init__(self, p: ModelParams, truth: Truth, var: Variation = Variation()):
-        from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, Sphere
-        from pydrake.math import RigidTransform
-        from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction,
-                                             MultibodyPlantConfig)
-        from pydrake.multibody.tree import PrismaticJoint, SpatialInertia
         from pydrake.systems.analysis import Simulator
-        from pydrake.systems.framework import DiagramBuilder
+        from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import (BallWorld,
+                                                                              build_ball_plant)
         self.truth, self.p = truth, p
         t = truth
         ee_r, ball_m, table_z = p.ee_radius + var.ee_dr, p.ball_mass, var.table_dz
@@ -180,35 +177,15 @@ class TruePlant:
             other = "ee" if t.target == "ee_ball" else "table"
             mu[other] = t.value * p.mu / (2 * p.mu - t.value)
         self.ee_r, self.ball_r, self.ball_m, self.table_z = ee_r, ball_r, ball_m, table_z
-        builder = DiagramBuilder()
-        plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
-            time_step=SIM_DT, discrete_contact_approximation="sap", contact_model="point"),
-            builder)
-
-        def props(m):
-            pr = ProximityProperties()
-            AddContactMaterial(pr, point_stiffness=var.stiffness, friction=CoulombFriction(m, m))
-            pr.AddProperty("material", "relaxation_time", var.relaxation_time)
-            return pr
-        inst = plant.AddModelInstance("ee")
-        lx = plant.AddRigidBody("ee_x_link", inst, SpatialInertia.Zero())
-        ly = plant.AddRigidBody("ee_y_link", inst, SpatialInertia.Zero())
-        ee = plant.AddRigidBody("ee", inst, SpatialInertia.SolidSphereWithMass(p.ee_mass, ee_r))
-        for name, a, b, ax in (("ee_x", plant.world_frame(), lx.body_frame(), [1, 0, 0]),
-                               ("ee_y", lx.body_frame(), ly.body_frame(), [0, 1, 0]),
-                               ("ee_z", ly.body_frame(), ee.body_frame(), [0, 0, 1])):
-            plant.AddJointActuator(name, plant.AddJoint(PrismaticJoint(name, a, b, ax)))
-        plant.RegisterCollisionGeometry(ee, RigidTransform(), Sphere(ee_r), "ee", props(mu["ee"]))
-        binst = plant.AddModelInstance("ball")
-        ball = plant.AddRigidBody("ball", binst,
-                                  SpatialInertia.SolidSphereWithMass(ball_m, ball_r))
-        plant.RegisterCollisionGeometry(ball, RigidTransform(), Sphere(ball_r), "ball",
-                                        props(mu["ball"]))
-        plant.RegisterCollisionGeometry(plant.world_body(), RigidTransform([0, 0, table_z - 0.05]),
-                                        Box(2.0, 2.0, 0.1), "table", props(mu["table"]))
-        plant.Finalize()
+        world = BallWorld(ee_radius=ee_r, ball_radius=ball_r, ball_mass=ball_m,
+                          ee_mass=p.ee_mass, mu_ee=mu["ee"], mu_ball=mu["ball"],
+                          mu_table=mu["table"], stiffness=var.stiffness,
+                          relaxation_time=var.relaxation_time, table_z=table_z,
+                          time_step=SIM_DT)
+        built = build_ball_plant(world)
+        plant = built.plant
         self.plant = plant
-        self.diagram = builder.Build()
+        self.diagram = built.diagram
         self.sim = Simulator(self.diagram)
         self.ctx = self.sim.get_mutable_context()
         self.pctx = plant.GetMyMutableContextFromRoot(self.ctx)

@@ -420,6 +420,9 @@ def ball_spec(scenario) -> BallSpec:
         not_applicable={
             "contact_stiffness": "the model's contacts are rigid (Anitescu LCS): no stiffness",
             "contact_damping": "the model's contacts are rigid (Anitescu LCS): no damper",
+            "contact_dissipation": "the model's contacts are rigid (Anitescu LCS): no "
+                                   "relaxation time",
+            "torsional_friction": "the LCS's point contacts have no torsional friction",
             "coulomb_friction": "no sliding joint in the model; the ball's losses are "
                                 "rolling_resistance / viscous_damping",
             "actuator_gain": "the recording holds the applied EE force; " + why_not,

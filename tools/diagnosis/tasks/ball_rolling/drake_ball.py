@@ -1,0 +1,279 @@
+"""The `drake` model backend of the ball-rolling diagnosis: Drake's MultibodyPlant of the
+scenario's world (ball_plant.py: EE tip sphere driven by the recorded EE force, ball,
+table; SAP with point contact at the recording step / 4), replaying the recorded inputs
+from recorded states over the engine's windows.
+
+It satisfies the engine's model protocol as the `lcs` backend (effects_ball.py) does:
+`patch(spec, effects)` (spec.custom_patch) gives a model with `rollout(X0, U, horizon,
+lag, rows)` -> (states [W, H, 19], contact placeholder [W, H, 2]), `A` (the LCS's, for
+the noise floor's propagation only) and `contact_states` (locate's picture: the model's
+contact from Drake's one-step gaps, the data's from the LCS's inference). The spec keeps
+the LCS backend's per-sample cache (`prepare`): the smoothed start positions every
+rollout starts from (the same estimate for both backends) and the signed distances the
+evidence phases use.
+
+The world's nominal values come from the scenario: `model.ee_radius`, `ball_radius`,
+`ball_mass`, `ee_mass`, `friction`, overridden by its `drake:` section (table height,
+per-pair friction, point stiffness, relaxation time, force elements). Effects in Drake's
+terms (what `drake_patch` changes):
+  contact_offset[ee_ball]      the EE sphere smaller by the offset (m)
+  contact_offset[ball_table]   the table lower by the offset (m)
+  friction_coefficient[pair]   that pair's mu
+  mass_scale[ball]             the ball's mass (and inertia) scaled
+  contact_stiffness[contacts]  every geometry's point stiffness (N/m)
+  contact_dissipation[contacts] every geometry's SAP relaxation time (s)
+  rolling_resistance[ball_table], torsional_friction[ball_table], viscous_damping[ball],
+  external_force[ball_x|ball_y]  force elements (ball_forces.py)
+  actuator_delay               the recorded inputs act that much later (a nuisance)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field, replace
+from collections import OrderedDict
+
+import numpy as np
+
+from adaptive_c3.tools.diagnosis.backends.effects import delayed_inputs
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_forces import BallForceCoefficients
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import BallWorld, geometry_friction
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball_rollout import Roller
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import (
+    POS, QUAT, BallSpec, ball_patch, ball_spec)
+
+SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is 0
+FIT_WINDOWS = 120         # about this many rollout windows in the fit (window_stride)
+EVAL_STRIDE = 2           # the reported error tables use every 2nd window
+CACHE_MODELS = 24         # rollouts kept for this many parameter sets
+
+# the LCS patch of each finding (what it means for the controller's model)
+LCS_COUNTERPART = {
+    "contact_offset[ee_ball]": "model.ee_radius (LCS: contact_offset[ee_ball])",
+    "contact_offset[ball_table]": "contact_offset[ball_table] (the LCS's table height)",
+    "friction_coefficient[ee_ball]": "friction_coefficient[ee_ball] (the controller: "
+                                     "model.friction, one mu for both pairs)",
+    "friction_coefficient[ball_table]": "friction_coefficient[ball_table] (the controller: "
+                                        "model.friction, one mu for both pairs)",
+    "mass_scale[ball]": "model.ball_mass (LCS: mass_scale[ball])",
+    "rolling_resistance[ball_table]": "rolling_resistance[ball_table]",
+    "viscous_damping[ball]": "viscous_damping[ball]",
+    "external_force[ball_x]": "external_force[ball_x]",
+    "external_force[ball_y]": "external_force[ball_y]",
+}
+NO_COUNTERPART = "no LCS counterpart"
+
+
+def lcs_counterpart(label: str) -> str:
+    """The LCS patch of a drake finding (an effect label), or NO_COUNTERPART."""
+    return LCS_COUNTERPART.get(label, NO_COUNTERPART + (
+        " (the LCS's contacts are rigid)" if label.startswith("contact_") else
+        " (a point contact in the LCS has no torsional friction)"))
+
+
+@dataclass
+class DrakeBallSpec(BallSpec):
+    """BallSpec whose model is Drake's plant (the module doc)."""
+    model: str = "drake"
+    world: BallWorld = None               # the nominal world, time_step set
+    mu_pairs: tuple = (1.0, 1.0)          # nominal mu of (ee_ball, ball_table)
+    forces: BallForceCoefficients = BallForceCoefficients()
+    workers: int = 2
+    fit_windows: int = FIT_WINDOWS
+    eval_stride: int = EVAL_STRIDE
+    # LM's forward differences: 1 % of the range / 20 (SAP is solved to a tolerance;
+    # 1e-4 of it, the LCS's, gave Jacobians of solver noise and LM stopped at its start)
+    jacobian_step: float = 1e-2
+    roller: object = None
+    rollouts: OrderedDict = field(default_factory=OrderedDict)
+
+    def prepare(self, rec) -> None:
+        super().prepare(rec)
+        n = sum(max(len(idx) - 10, 0) for _, idx in rec.episodes())
+        self.window_stride = max(3, int(np.ceil(n / self.fit_windows)))
+
+    def custom_patch(self, effects) -> "DrakeBallPatched":
+        return drake_patch(self, effects)
+
+    description: str = ("Drake's MultibodyPlant of the scenario's world, SAP with point "
+                        "contact at the recording step / 4")
+
+    def close(self) -> None:
+        """End the rollout worker processes (they start again on the next rollout)."""
+        if self.roller is not None:
+            self.roller.close()
+            self.roller = None
+
+    @staticmethod
+    def lcs_counterpart(label: str) -> str:
+        return lcs_counterpart(label)
+
+    def patch_scenario(self, data: dict, effects) -> list:
+        """Write the effects [(Candidate, values)] into the scenario dict's `drake:` section
+        (the world with them, as drake_patch builds it); returns notes."""
+        P = drake_patch(self, effects)
+        w, f, d = P.world, P.forces, data.setdefault("drake", {})
+        keys = {"contact_offset[ee_ball]": ("ee_radius", w.ee_radius),
+                "contact_offset[ball_table]": ("table_height", w.table_z),
+                "mass_scale[ball]": ("ball_mass", w.ball_mass),
+                "contact_stiffness[contacts]": ("point_stiffness", w.stiffness),
+                "contact_dissipation[contacts]": ("relaxation_time", w.relaxation_time),
+                "rolling_resistance[ball_table]": ("rolling_resistance", f.rolling),
+                "torsional_friction[ball_table]": ("torsional_friction", f.torsional),
+                "viscous_damping[ball]": ("viscous_drag", f.drag),
+                "external_force[ball_x]": ("external_force", list(f.force)),
+                "external_force[ball_y]": ("external_force", list(f.force))}
+        notes = []
+        for c, _ in effects:
+            if c.name == "friction_coefficient":
+                mu = list(d.get("friction", [-1.0, -1.0]))
+                i = self.pair_names.index(c.target)
+                mu[i] = float(P.mu_pairs[i])
+                d["friction"] = mu
+                notes.append(f"{c.label()} -> drake.friction[{i}]")
+            elif c.label() in keys:
+                key, value = keys[c.label()]
+                d[key] = [float(v) for v in value] if isinstance(value, list) else float(value)
+                notes.append(f"{c.label()} -> drake.{key}")
+            else:
+                raise ValueError(f"{c.label()} has no drake: key")
+        return notes
+
+
+@dataclass
+class DrakeBallPatched:
+    """The plant with a set of effects: a world, force elements and an input delay."""
+    spec: DrakeBallSpec
+    world: BallWorld
+    forces: BallForceCoefficients
+    delay_steps: float = 0.0
+    mu_pairs: tuple = (1.0, 1.0)      # per-pair mu (ee_ball, ball_table) the world combines to
+
+    @property
+    def A(self):
+        return self.spec.lcs.A
+
+    def _starts(self, X0, rows):
+        X = np.array(X0, float)
+        X[:, POS] = self.spec.cache["psmooth"][rows]      # the smoothed start positions
+        q = X[:, QUAT]
+        n = np.linalg.norm(q, axis=1, keepdims=True)
+        X[:, QUAT] = np.where(n > 1e-6, q / np.maximum(n, 1e-12), [1.0, 0, 0, 0])
+        return X
+
+    def rollout(self, X0, U, horizon, lag, rows):
+        if rows is None:
+            raise ValueError("the ball-rolling model needs the recording rows of the windows")
+        spec, rows = self.spec, np.asarray(rows)
+        X = self._starts(X0, rows)
+        inputs = np.stack([delayed_inputs(U, lag, self.delay_steps, h)
+                           for h in range(horizon)], 1)
+        key = (self.world, self.forces, self.delay_steps, horizon)
+        memo = spec.rollouts.setdefault(key, {})
+        spec.rollouts.move_to_end(key)
+        while len(spec.rollouts) > CACHE_MODELS:
+            spec.rollouts.popitem(last=False)
+        ids = [(int(r), x.tobytes(), u.tobytes()) for r, x, u in zip(rows, X, inputs)]
+        todo = [i for i, k in enumerate(ids) if k not in memo]
+        if todo:
+            if spec.roller is None:
+                spec.roller = Roller(spec.workers)
+            out = spec.roller(self.world, self.forces, X[todo], inputs[todo], _substeps(spec))
+            for i, x in zip(todo, out):
+                memo[ids[i]] = x
+        Xs = np.stack([memo[k] for k in ids], 0)
+        return Xs, np.zeros((len(ids), horizon, 2))
+
+    def contact_states(self, W1, floor1, lag):
+        """(model contact [W, 2], data contact [W, 2], inferred force [W, 2]): the model's
+        from the plant's gaps after one step (penetration = a compliant contact force),
+        the data's as the LCS backend infers it (effects_ball.BallPatched)."""
+        _, data, lam = ball_patch(self.spec, []).contact_states(W1, floor1, lag)
+        X1 = self.rollout(W1.X0, W1.U, 1, lag, W1.row)[0][:, 0]
+        w = self.world
+        gap_ee = np.linalg.norm(X1[:, 0:3] - X1[:, 7:10], axis=1) - w.ee_radius - w.ball_radius
+        gap_tab = X1[:, 9] - w.ball_radius - w.table_z
+        return np.stack([gap_ee < 0, gap_tab < 0], 1), data, lam
+
+
+def _substeps(spec) -> int:
+    return max(1, int(round(spec.dt / spec.world.time_step)))
+
+
+def drake_patch(spec: DrakeBallSpec, effects) -> DrakeBallPatched:
+    w = spec.world
+    mu = list(spec.mu_pairs)
+    f = spec.forces
+    force = list(f.force)
+    ee_r, table_z, mass = w.ee_radius, w.table_z, w.ball_mass
+    k, tau = w.stiffness, w.relaxation_time
+    rolling, torsional, drag, delay = f.rolling, f.torsional, f.drag, 0.0
+    pairs = list(spec.pair_names)
+    for cand, p in effects:
+        name, t, v = cand.name, cand.target, float(np.asarray(p, float)[0])
+        if name in ("contact_offset", "calibration_offset"):
+            if t == "ee_ball":
+                ee_r -= v
+            else:
+                table_z -= v
+        elif name == "friction_coefficient":
+            mu[pairs.index(t)] = v
+        elif name == "mass_scale":
+            mass *= v
+        elif name == "contact_stiffness":
+            k = v
+        elif name == "contact_dissipation":
+            tau = v
+        elif name == "rolling_resistance":
+            rolling += v
+        elif name == "torsional_friction":
+            torsional += v
+        elif name == "viscous_damping":
+            drag += v
+        elif name == "external_force":
+            force[("ball_x", "ball_y").index(t)] += v
+        elif name == "actuator_delay":
+            delay += v / spec.dt
+        else:
+            raise ValueError(f"effect {name} is not modelled by the drake ball-rolling backend")
+    mu_ee, mu_ball, mu_table = geometry_friction(max(mu[0], 1e-3), max(mu[1], 1e-3))
+    world = replace(w, ee_radius=max(ee_r, 1e-3), table_z=table_z, ball_mass=max(mass, 1e-4),
+                    stiffness=max(k, 1.0), relaxation_time=max(tau, 0.0), mu_ee=mu_ee,
+                    mu_ball=mu_ball, mu_table=mu_table)
+    forces = BallForceCoefficients(rolling, torsional, drag, tuple(force))
+    return DrakeBallPatched(spec, world, forces, delay, tuple(mu))
+
+
+def drake_ball_spec(scenario, workers: int = 2) -> DrakeBallSpec:
+    """The diagnosis view of a ball-rolling scenario's Drake world (module doc)."""
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import DIAG_DT
+    base = ball_spec(scenario)
+    m, d = scenario.model, scenario.drake
+    time_step = d.time_step if d.time_step > 0 else DIAG_DT / SUBSTEPS
+    mu_pairs = tuple(float(v) if v >= 0 else float(m.friction) for v in d.friction)
+    world = BallWorld(ee_radius=d.ee_radius or m.ee_radius,
+                      ball_radius=d.ball_radius or m.ball_radius,
+                      ball_mass=d.ball_mass or m.ball_mass, ee_mass=m.ee_mass,
+                      stiffness=d.point_stiffness, relaxation_time=d.relaxation_time,
+                      table_z=d.table_height, time_step=time_step)
+    forces = BallForceCoefficients(d.rolling_resistance, d.torsional_friction,
+                                   d.viscous_drag, tuple(d.external_force))
+    fields = {f: getattr(base, f) for f in base.__dataclass_fields__}
+    fields["not_applicable"] = {
+        "contact_damping": "SAP's dissipation is contact_dissipation (a relaxation time, s)",
+        "coulomb_friction": "no sliding joint in the model; the ball's losses are "
+                            "rolling_resistance / viscous_damping / torsional_friction",
+        "actuator_gain": base.not_applicable["actuator_gain"],
+        "actuator_delay": base.not_applicable["actuator_delay"],
+        "r_comp": "no complementarity residual in Drake's compliant contact; the gaps "
+                  "are contact_offset per pair",
+    }
+    fields["effect_targets"] = dict(base.effect_targets, torsional_friction=("ball_table",),
+                                    contact_dissipation=("contacts",))
+    fields["stiffness_groups"] = {"contacts": ((0, 1), float(d.point_stiffness))}
+    fields["relaxation_groups"] = {"contacts": ((0, 1), float(d.relaxation_time))}
+    # costly rollouts: a coarse grid (offsets every 2 mm: a compliant table penetrated by
+    # a few mm makes the error steep, LM must start within ~1 mm), one pair, LM to 0.1 %
+    # of the cost or 0.1 % of the range / 20
+    fields["grids"] = dict(base.grids, contact_offset=np.linspace(-0.004, 0.004, 5))
+    fields.update(cache={}, grid_points=5, pair_singles=2, fit_tolerance=(1e-3, 1e-3))
+    return DrakeBallSpec(**fields, world=world, mu_pairs=mu_pairs, forces=forces,
+                         workers=workers)
