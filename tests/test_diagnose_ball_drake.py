@@ -107,6 +107,7 @@ def test_patched_scenario_sets_drake_keys_that_load_and_read_back(scenario, tmp_
 
 
 def test_cli_model_refusals_exit_2_with_one_line(tmp_path, capsys):
+    """diagnose --model drake of a cartpole, an unknown --model, evaluate of a ball recording."""
     n = 60
     rec = Recording(t=np.arange(n) * 0.01, x=np.zeros((n, 4)), u=np.zeros((n, 1)),
                     state_names=["cart_x", "pole_theta", "cart_xdot", "pole_thetadot"],
@@ -120,3 +121,13 @@ def test_cli_model_refusals_exit_2_with_one_line(tmp_path, capsys):
         err = capsys.readouterr().err.strip()
         assert rc == 2
         assert len(err.splitlines()) == 1 and needle in err, err
+    # evaluate rolls out rigid_object recordings only: a ball recording is refused
+    from adaptive_c3.models.ball_rolling_controller_model import INPUT_NAMES, STATE_NAMES
+    ball = Recording(t=np.arange(n) * 0.01, x=np.zeros((n, 19)), u=np.zeros((n, 3)),
+                     state_names=list(STATE_NAMES), input_names=list(INPUT_NAMES))
+    path = str(tmp_path / "ball.npz")
+    save_recording(path, ball)
+    assert main(["evaluate", path, "--scenario", str(BALL), "--model", "drake",
+                 "--out", str(tmp_path / "ev")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "supports task rigid_object" in err, err

@@ -9,6 +9,11 @@ Rows
                                    same run (full only): every fold / jackknife / half-horizon
                                    refit by Levenberg-Marquardt, tolerances 1e-10 / 1e-9.
                                    The first row carries baseline/speedup against it.
+  diagnose/ball/drake/15ep         the same recording diagnosed with `--model drake` (Drake's
+                                   SAP plant of the scenario's world, 2 worker processes; one
+                                   run), with baseline/speedup against diagnose/ball/15ep
+                                   (speedup < 1: the drake diagnosis is that much slower);
+                                   cpu_s: the CPU time of the process and its workers.
   diagnose/cube/lcs/24tosses       `diagnose_rigid` of 24 synthetic cube tosses (40 steps,
   diagnose/cube/drake/24tosses     made by the drake backend with mu 0.3; not timed), fit on
                                    10, effects friction and table_offset, 2 workers, with the
@@ -59,7 +64,26 @@ def run_bench(quick: bool = False) -> list[dict]:
         rows.append({"name": "diagnose/ball/15ep/exact_refits", "median_ms": s_wall * 1e3,
                      "wall_s": s_wall, "diagnose_s": s_diag, "selected": s_sel})
         row.update(baseline=rows[1]["name"], speedup=s_wall / wall)
-    return rows + _rigid_rows()
+    return rows + [_drake_ball_row(rec, scenario, row)] + _rigid_rows()
+
+
+def _drake_ball_row(rec, scenario, lcs_row: dict) -> dict:
+    """The ball diagnosis with the drake backend, against the lcs row."""
+    import resource
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball import drake_ball_spec
+
+    def cpu():
+        a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
+        return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
+    spec = drake_ball_spec(scenario, workers=2)
+    c0 = cpu()
+    try:
+        wall, diag, sel = _timed(rec, spec)
+    finally:
+        spec.close()           # its workers' CPU time counts once they are waited for
+    return {"name": "diagnose/ball/drake/15ep", "median_ms": wall * 1e3, "wall_s": wall,
+            "diagnose_s": diag, "cpu_s": cpu() - c0, "selected": sel,
+            "baseline": lcs_row["name"], "speedup": lcs_row["wall_s"] / wall}
 
 
 def _rigid_rows() -> list[dict]:

@@ -41,7 +41,7 @@ from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import (
     POS, QUAT, BallSpec, ball_patch, ball_spec)
 
 SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is 0
-FIT_WINDOWS = 120         # about this many rollout windows in the fit (window_stride)
+FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
 CACHE_MODELS = 24         # rollouts kept for this many parameter sets
 

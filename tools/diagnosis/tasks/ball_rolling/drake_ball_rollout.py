@@ -106,4 +106,5 @@ class Roller:
     def close(self):
         if self._pool is not None:
             self._pool.terminate()
+            self._pool.join()
             self._pool = None
