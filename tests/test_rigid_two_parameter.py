@@ -74,3 +74,49 @@ def test_drake_diagnosis_finds_a_concealed_torsional_friction():
     held = r["held_out"]
     assert (held["diagnosed"]["summary"]["position_pct_mean_median"]
             < held["nominal"]["summary"]["position_pct_mean_median"])
+
+
+class _FakeScorer:
+    """Scores without rollouts: table_offset 2 mm lowers the fit episodes' error by 2 but
+    raises the validation episodes' by 1 (an over-fit), friction 0.25 lowers both by 1."""
+    made = []
+
+    def __init__(self, episodes, dt, size, workers=1, model="drake", starts=None):
+        self.n, self.role = len(episodes), ("fit", "validation", "held")[min(len(self.made), 2)]
+        self.made.append(self)
+
+    def _one(self, s):
+        bump = lambda v, at, w: float(np.exp(-((v - at) / w) ** 2))   # noqa: E731
+        offset = bump(s.patch.table_offset, 2e-3, 1e-3)
+        friction = bump(s.drake.friction if s.drake.friction >= 0 else 0.18, 0.25, 0.03)
+        e = 10.0 - friction - (2.0 * offset if self.role == "fit" else -1.0 * offset)
+        return e + 0.01 * np.arange(self.n)
+
+    def __call__(self, scenarios, progress=None):
+        return np.array([self._one(s) for s in scenarios])
+
+    def run(self, scenarios, progress=None, keep=False):
+        return self(scenarios), None
+
+    def close(self):
+        pass
+
+
+def test_a_candidate_that_fails_validation_lets_the_next_best_be_checked(monkeypatch):
+    """The best fit candidate (table_offset) makes the validation episodes worse and is
+    rejected; the next (friction) pays on them and is kept."""
+    import adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose as rd
+    scenario, _ = load_scenario(CUBE)
+    rec = concealed_tosses(scenario, episodes=12, steps=12, seed=1)
+    _FakeScorer.made.clear()
+    monkeypatch.setattr(rd, "Scorer", _FakeScorer)
+    monkeypatch.setattr(rd, "held_out_runs", lambda runs, ids, *a, **k: (
+        {tag: {"summary": {}, "per_episode": [{"position_pct_mean": 1.0}] * len(ids)}
+         for tag, _, _ in runs}, {}))
+    r = rd.diagnose_rigid(rec, scenario, max_fit_episodes=6, workers=1, model="drake",
+                          effects=("table_offset", "friction"), progress=False)
+    first = r["rounds"][0]
+    assert [t["name"] for t in first["tries"]] == ["table_offset", "friction"]
+    assert [t["accepted"] for t in first["tries"]] == [False, True]
+    assert [s["name"] for s in r["selected"]] == ["friction"]
+    assert r["chosen"]["drake.friction"] == pytest.approx(0.25, abs=0.01)

@@ -77,7 +77,10 @@ def compare(rec, scenario, fit_episodes: dict | None = None, workers: int = 2, s
                                              "lcs")}
                       for s in r["selected"]],
             rounds=[dict(tried=x["tried"], accepted=x["accepted"],
-                         gain=x["validation_gain"]["relative"]) for x in r["rounds"]],
+                         tries=[(t["name"], t["accepted"], t["validation_gain"]["relative"])
+                                for t in x["tries"]],
+                         candidates=[(c["name"], c["value"], c["refitted"], c["fit_mean"])
+                                     for c in x["candidates"]]) for x in r["rounds"]],
             held_out={k: v["summary"] for k, v in r["held_out"].items()})
         split = r["split"]
         if checkpoint:

@@ -23,11 +23,14 @@ are labelled as such.
    with friction: softer contact changes how far a landing cube slides) is scored at
    each value with its refit key at REFIT_FACTORS times its current value, keeping the
    best (a profile; no fine points); the refitted value goes with it. Greedy forward
-   selection: the effect that lowers the fit error most is kept only if it also lowers
-   the validation episodes' error, with a bootstrap 95% interval of the paired
-   improvement above zero and at least MIN_GAIN relative; then the next one is tried
-   with the kept ones in place (at most MAX_EFFECTS). That is the over-fitting guard:
-   every added effect must pay on episodes it was not fitted on.
+   selection: the candidates that lower the fit error are checked on the validation
+   episodes in order of fit error, at most MAX_TRIES a round, and the first whose
+   bootstrap 95% interval of the paired improvement is above zero, with at least
+   MIN_GAIN relative, is kept (a round whose MAX_TRIES best all fail ends the
+   selection); then the next round runs with the kept ones in place (at most
+   MAX_EFFECTS). That is the over-fitting guard: every added effect must pay on
+   episodes it was not fitted on (the held-out episodes, never used to choose, then
+   show what the choice is worth).
 4. The held-out episodes are rolled out with the nominal and the patched model (with the
    bootstrap interval of the paired per-episode drop); the patched scenario is written
    with the chosen values in its keys.
@@ -55,6 +58,7 @@ __all__ = ["EFFECTS", "FAILED_SCORE", "diagnose_rigid", "with_values", "refine_m
            "bootstrap_interval", "paired_gain"]
 
 MAX_EFFECTS = 3
+MAX_TRIES = 3            # candidates (best fit first) checked on the validation episodes a round
 MIN_GAIN = 0.02          # relative validation improvement an effect must bring
 BOOTSTRAP = 2000
 TRIM = 0.2               # fraction of episodes cut at each end by the fit objective
@@ -246,14 +250,24 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
                                   fit_mean=float(objective(S_best)),
                                   fit_gain_relative=float(1 - objective(S_best) / objective(S0))))
             cands.sort(key=lambda c: c["fit_mean"])
-            top = cands[0]
-            top_values = {top["key"]: top["value"], **top["refitted"]}
-            V1 = val_score([with_values(base, top_values)])[0]
-            gain = paired_gain(V0, V1, rng)
-            accepted = gain["ci95"][0] > 0 and gain["relative"] >= MIN_GAIN
-            rounds.append(dict(candidates=cands, tried=top["name"], validation_gain=gain,
-                               accepted=bool(accepted)))
-            if not accepted:
+            tries = []
+            for top in [c for c in cands if c["fit_mean"] < objective(S0)][:MAX_TRIES]:
+                top_values = {top["key"]: top["value"], **top["refitted"]}
+                V1 = val_score([with_values(base, top_values)])[0]
+                gain = paired_gain(V0, V1, rng)
+                accepted = bool(gain["ci95"][0] > 0 and gain["relative"] >= MIN_GAIN)
+                tries.append(dict(name=top["name"], validation_gain=gain, accepted=accepted))
+                if accepted:
+                    break
+            if not tries:            # no candidate lowers the fit error: report the best one
+                rounds.append(dict(candidates=cands, tried=cands[0]["name"], tries=[],
+                                   validation_gain=None, accepted=False))
+                break
+            rounds.append(dict(candidates=cands, tried=tries[-1]["name"], tries=tries,
+                               validation_gain=tries[-1]["validation_gain"],
+                               accepted=tries[-1]["accepted"],
+                               kept=top if tries[-1]["accepted"] else None))
+            if not tries[-1]["accepted"]:
                 break
             chosen.update(top_values)
             S0, V0 = fit_score([with_values(base, top_values)])[0], V1
@@ -276,7 +290,7 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
     held_gain = paired_gain(
         np.array([r["position_pct_mean"] for r in held["nominal"]["per_episode"]]),
         np.array([r["position_pct_mean"] for r in held["diagnosed"]["per_episode"]]), rng)
-    selected = [dict(r["candidates"][0], validation_gain=r["validation_gain"])
+    selected = [dict(r["kept"], validation_gain=r["validation_gain"])
                 for r in rounds if r["accepted"]]
     return dict(dt=dt, size=size, model=model, initial_state=initial_state, split=parts,
                 fit_episodes=fit_ids, located=located, rounds=rounds, selected=selected,

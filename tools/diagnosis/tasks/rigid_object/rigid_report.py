@@ -56,9 +56,11 @@ def plain_summary(result: dict) -> str:
     n = held["nominal"]["summary"]["episodes"]
     head = f"Model diagnosed: {model} ({words}); starts: {result.get('initial_state', 'first-row')}. "
     if not result["selected"]:
-        first = result["rounds"][0]["candidates"][0] if result["rounds"] else None
-        tail = (f" The best single candidate ({first['name']}) did not improve the validation "
-                "episodes enough to be kept." if first else "")
+        first = result["rounds"][0] if result["rounds"] else None
+        names = ", ".join(t["name"] for t in (first or {}).get("tries") or []) or (
+            first["candidates"][0]["name"] if first else "")
+        tail = (f" The best candidates on the fit episodes ({names}) did not improve the "
+                "validation episodes enough to be kept." if first else "")
         return (head + f"No effect in the library explains the mismatch better than the plain "
                 f"model on episodes it was not fitted on.{tail} Held-out median position error "
                 f"{before:.1f} % of the object's size ({n} episodes).")
@@ -106,6 +108,7 @@ def report_dict(result: dict) -> dict:
                         "up to a yaw and a shift) kept on one side"),
         mismatch=result["located"],
         rounds=[dict(tried=r["tried"], accepted=r["accepted"], validation_gain=r["validation_gain"],
+                     tries=r.get("tries"),
                      candidates=[{k: c.get(k) for k in ("name", "key", "value", "ci95", "unit",
                                                         "refitted", "fit_mean",
                                                         "fit_gain_relative", "physics")}
