@@ -131,3 +131,27 @@ def test_cli_model_refusals_exit_2_with_one_line(tmp_path, capsys):
                  "--out", str(tmp_path / "ev")]) == 2
     err = capsys.readouterr().err.strip()
     assert len(err.splitlines()) == 1 and "supports task rigid_object" in err, err
+
+
+@pytest.mark.slow
+def test_cli_drake_diagnosis_names_a_table_offset_and_patches_the_drake_section(tmp_path,
+                                                                               capsys):
+    """Dev draw 5019 (the table 3.6 mm higher than the model's, with the second-engine
+    variation): named, the LCS counterpart given, the patched scenario loads."""
+    import json
+    rec, truth, _ = concealed_draw(5019)
+    assert (truth.name, truth.target) == ("contact_offset", "ball_table")
+    path = str(tmp_path / "r.npz")
+    save_recording(path, rec)
+    out = tmp_path / "out"
+    assert main(["diagnose", path, "--scenario", str(BALL), "--model", "drake",
+                 "--out", str(out)]) == 0
+    assert "model diagnosed: drake" in capsys.readouterr().out
+    report = json.loads((out / "report.json").read_text())
+    assert report["model_backend"] == "drake"
+    assert [(s["name"], s["target"]) for s in report["selected"]] == [("contact_offset",
+                                                                       "ball_table")]
+    assert report["lcs_counterpart"][0]["lcs"].startswith("contact_offset[ball_table]")
+    assert report["summary"].startswith("Model diagnosed: drake")
+    patched = load_scenario(out / "patched_scenario.yaml")[0]
+    assert patched.drake.table_height == pytest.approx(0.0035, abs=6e-4)

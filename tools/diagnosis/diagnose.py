@@ -358,6 +358,11 @@ def cmd_diagnose(args) -> int:
     spec = model_spec(scenario, getattr(args, "model", None) or "lcs",
                       workers=getattr(args, "workers", 2) or 2)
     check_recording(rec, spec)
+    if getattr(spec, "model", "lcs") == "drake" and base:
+        try:                                  # an `effects:` list of an lcs diagnosis
+            patch(spec, base)
+        except ValueError as e:
+            raise _user_error(f"{args.scenario}: {e}")
     out = Path(args.out) if args.out else Path("runs") / (
         f"diagnose-{Path(args.recording).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     out.mkdir(parents=True, exist_ok=True)
