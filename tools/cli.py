@@ -139,12 +139,14 @@ def build_parser() -> argparse.ArgumentParser:
                       help="rigid_object: fraction of episodes held out (default 0.3)")
     diag.add_argument("--fit-episodes", type=int, default=30,
                       help="rigid_object: at most this many episodes to fit on (default 30)")
-    diag.add_argument("--workers", type=int, default=2, help="rigid_object: processes (default 2)")
+    diag.add_argument("--workers", type=int, default=2,
+                      help="rigid_object, and ball_rolling with --model drake: processes (default 2)")
     diag.add_argument("--effects", default=None,
                       help="rigid_object: comma-separated effects to try (default: the whole library)")
     diag.add_argument("--model", default="lcs", metavar="lcs|drake",
-                      help="rigid_object: the model diagnosed - lcs, the controller's Anitescu LCS "
-                      "(default), or drake, Drake's SAP plant of the scenario's true world")
+                      help="rigid_object and ball_rolling: the model diagnosed - lcs, the "
+                      "controller's Anitescu LCS (default), or drake, Drake's SAP plant of the "
+                      "scenario's true world (ball_rolling: its drake: section)")
     diag.add_argument("--initial-state", default="ballistic", metavar="ballistic|first-row",
                       help="rigid_object: rollout starts - a fit of each episode's free-flight "
                       "prefix (default) or its recorded first row")
