@@ -126,7 +126,7 @@ def test_patched_external_force_key_runs(tmp_path):
 
 @pytest.fixture(scope="module")
 def real_comparison():
-    """rigid_compare on the real tosses (both diagnoses; ~25 min on 2 loaded cores)."""
+    """rigid_compare on the real tosses (both diagnoses; ~34 min on 2 loaded cores)."""
     if not DATA.is_file():
         pytest.skip("../shared/data/cube_tosses.npz not present")
     from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_compare import compare
@@ -139,19 +139,22 @@ def real_comparison():
 def test_real_tosses_diagnosed_lcs_beats_nominal(real_comparison):
     """Fitted on training tosses (twins kept on one side), on the held-out 30 % from the
     same fitted starts: diagnosed LCS beats nominal LCS by more than the bootstrap interval
-    of the difference of the medians."""
-    c = real_comparison["comparisons"]["ballistic"]
-    assert c["lcs_nominal_to_diagnosed"]["median_difference"]["ci95"][0] > 0
+    of the paired per-toss difference (and of the difference of the medians)."""
+    c = real_comparison["comparisons"]["ballistic"]["lcs_nominal_to_diagnosed"]
+    assert c["paired_difference"]["below"]
+    assert c["median_difference"]["ci95"][0] > 0
 
 
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="issue 30's target is not met: on the real tosses the "
-                   "drake diagnosis keeps no effect (inertia_scale lowers the median error but "
-                   "raises most tosses' errors on the validation tosses), so diagnosed Drake "
-                   "equals Drake's default")
+                   "drake diagnosis keeps no effect (its three best fit candidates - hollow-cube "
+                   "inertia 1.8x, contact stiffness 2000 N/m with friction re-fitted to 0.175, "
+                   "a 0.06 N upward force - fail the validation check: gains -7 %, +2.7 %, "
+                   "+2.4 % with intervals reaching below zero), so diagnosed Drake equals Drake's "
+                   "default (10.0 % on 117 held-out tosses)")
 def test_real_tosses_diagnosed_drake_beats_drake_default(real_comparison):
-    c = real_comparison["comparisons"]["ballistic"]
-    assert c["drake_default_to_diagnosed"]["median_difference"]["ci95"][0] > 0
+    c = real_comparison["comparisons"]["ballistic"]["drake_default_to_diagnosed"]
+    assert c["paired_difference"]["below"]
 
 
 def test_hydroelastic_box_rests_on_its_face():
