@@ -136,6 +136,28 @@ def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     assert judged["verdict"] == "named"
 
 
+def test_a_none_reads_an_offset_with_the_calibration_it_sits_on():
+    """The +-1 mm calibration nuisance is fitted first and a contact_offset of the same
+    pair on top of it; `none` must exclude a 1 mm TOTAL offset. Evaluation draw 41011 (a
+    1.03 mm table offset, 0.71 mm of it taken by the calibration, the rest's interval
+    inside +-1 mm) was answered without the offset in its set."""
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    spec = ball_spec(load_scenario(BALL)[0])
+    table = _fit("contact_offset", "ball_table", NONE + RNG.normal(0, 1, 30), NONE)
+    table.values[:] = 0.25e-3
+    table.ci[:] = [0.1e-3, 0.4e-3]
+    judged = verdict([table], None, NONE_EVAL, 0.1)
+    not_excluded(judged, spec, [table], NONE_EVAL, shift={"ball_table": 0.71e-3})
+    assert [a["name"] for a in judged["ambiguous"]] == ["none", "contact_offset"]
+    assert judged["ambiguous"][1]["ci95"] == pytest.approx([0.81e-3, 1.11e-3])
+    assert judged["ambiguous"][1]["values"] == pytest.approx([0.96e-3])
+    # the calibration of the other pair does not move it; without a shift it is excluded
+    for shift in ({"ee_ball": 0.71e-3}, None):
+        judged = verdict([table], None, NONE_EVAL, 0.1)
+        not_excluded(judged, spec, [table], NONE_EVAL, shift=shift)
+        assert judged["verdict"] == "none"
+
+
 @pytest.fixture(scope="module")
 def delayed_force_report(tmp_path_factory):
     """The CLI on a drawn external force with an 8 ms sensor delay and a softer contact."""

@@ -249,7 +249,9 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
         prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION),
         free_prob=long_problem(rec, spec, prob, P0, sigma, stride))
-    not_excluded(judged, spec, fits, none_eval, fits_free)
+    from adaptive_c3.tools.diagnosis.engine.report import calibration_shift
+    not_excluded(judged, spec, fits, none_eval, fits_free,
+                 shift=calibration_shift(dict(nuisance=nuisance)))
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)
