@@ -343,7 +343,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> Non
     shift {pair: m}: the calibration offsets kept as nuisance (report.calibration_shift);
     a contact_offset of that pair is fitted on top of it, so its interval is read as the
     total offset from the user's model (a 1.03 mm table offset of which the +-1 mm
-    calibration took 0.71 mm is not a `none` under a 1 mm size that matters)."""
+    calibration took 0.71 mm is not a `none` under a 1 mm size that matters). Intervals
+    are read as the physical effect (report.physical_interval: less the model's measured
+    model-form bias, widened by its spread)."""
+    from adaptive_c3.tools.diagnosis.engine.report import physical_interval
     sizes = getattr(spec, "relevant_size", None) or {}
     shift = shift or {}
     if not sizes or not (judged["verdict"] == "none"
@@ -359,10 +362,13 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> Non
         nominal = float(c.nominal(spec)[0])
         lo, hi = np.asarray(free.get(f.cands, f).ci, float)[0]
         add = shift.get(c.target, 0.0) if c.name == "contact_offset" else 0.0
-        lo, hi = lo + add, hi + add
+        src = free.get(f.cands, f)
+        _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
+                                         hi + add, float(src.sd[0]))
         if nominal - lo >= size[0] or hi - nominal >= size[1]:
             row = fit_row(f, none_eval)
-            row["values"] = [v + add for v in row["values"]]
+            row["values"] = [physical_interval(spec, c, v + add, 0.0, 0.0, 0.0)[0]
+                             for v in row["values"]]
             _join(judged, fit_row(None, none_eval), dict(
                 row, ci95=[float(lo), float(hi)],
                 note=f"not excluded: its 95 % interval {lo:.3g}..{hi:.3g} reaches a size "

@@ -14,6 +14,21 @@ from adaptive_c3.tools.diagnosis.engine.locate import LAG
 PLOT_ROLLOUT_STEPS = 40
 
 
+def physical_interval(spec, cand, value, lo, hi, sd):
+    """(value, lo, hi, sd) of one fitted parameter read as the physical effect: the
+    model's measured model-form bias of that effect (spec.model_form_bias {label: (bias,
+    sd)}: what the model's best fit reads beyond the true size on data of another engine)
+    is taken off, and its spread added to the interval's sd in quadrature at the
+    interval's own quantile. Unchanged for effects without a listed bias."""
+    bias, s = (getattr(spec, "model_form_bias", None) or {}).get(cand.label(), (0.0, 0.0))
+    if not (bias or s):
+        return value, lo, hi, sd
+    q = (hi - lo) / (2.0 * sd) if sd > 0 else 1.96
+    mid = 0.5 * (lo + hi) - bias
+    sd2 = float(np.hypot(sd, s))
+    return value - bias, mid - q * sd2, mid + q * sd2, sd2
+
+
 def _params(fit, spec, shift=None):
     """The fit's effects as report rows. shift {pair: m}: calibration offsets fitted as
     nuisance, added to a contact_offset / r_comp of the same pair (whose value is then
@@ -27,12 +42,16 @@ def _params(fit, spec, shift=None):
         pairs = (spec.pair_names if c.name == "r_comp" else [c.target] * p)
         add = [(shift or {}).get(pairs[j], 0.0) if c.name in ("contact_offset", "r_comp")
                else 0.0 for j in range(p)]
-        row = dict(
-            name=c.name, target=c.target,
-            params=[dict(name=names[j], value=float(fit.values[i + j]) + add[j], unit=units[j],
-                         ci95=[float(fit.ci[i + j, 0]) + add[j],
-                               float(fit.ci[i + j, 1]) + add[j]],
-                         sd=float(fit.sd[i + j])) for j in range(p)])
+        params = []
+        for j in range(p):
+            raw = float(fit.values[i + j]) + add[j]
+            v, lo, hi, sd = physical_interval(spec, c, raw, float(fit.ci[i + j, 0]) + add[j],
+                                              float(fit.ci[i + j, 1]) + add[j],
+                                              float(fit.sd[i + j]))
+            params.append(dict(name=names[j], value=v, unit=units[j], ci95=[lo, hi], sd=sd))
+            if v != raw:        # the model's own best value (what a patch of it uses)
+                params[-1]["model_value"] = raw
+        row = dict(name=c.name, target=c.target, params=params)
         by_phase = getattr(fit, "phase_estimates", None)     # evidence.widen_for_phases
         if by_phase:
             row["by_phase"] = {ph: [float(v[i + j]) + add[j] for j in range(p)]
