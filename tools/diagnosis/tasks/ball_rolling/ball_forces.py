@@ -4,7 +4,8 @@ constant force.
 
 `ball_wrenches` is the pure-numpy core; `BallForces` the LeafSystem that feeds it into
 the plant's `applied_spatial_force` input (an ExternallyAppliedSpatialForce per ball at
-its centre, world frame).
+its centre, world frame). The coefficients and the ball mass are a numeric parameter of
+its context (`set_coefficients`), so one built diagram serves every parameter set.
 """
 from __future__ import annotations
 
@@ -14,7 +15,7 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.multibody.math import SpatialForce
 from pydrake.multibody.plant import ExternallyAppliedSpatialForce
-from pydrake.systems.framework import LeafSystem
+from pydrake.systems.framework import BasicVector, LeafSystem
 
 G = 9.81
 OMEGA0 = 0.3              # rad/s: the resistance torques saturate below this spin
@@ -54,32 +55,48 @@ def ball_wrenches(w: np.ndarray, v: np.ndarray, gap: np.ndarray, mass: float,
     return tau, f
 
 
+def _parameter(coefficients: BallForceCoefficients, mass: float) -> np.ndarray:
+    c = coefficients
+    return np.array([c.rolling, c.torsional, c.drag, c.force[0], c.force[1], mass], float)
+
+
 class BallForces(LeafSystem):
     """Input `state`: the plant's state. Output `spatial_forces`: one
-    ExternallyAppliedSpatialForce per ball (body index, at its origin, world frame)."""
+    ExternallyAppliedSpatialForce per ball (body index, at its origin, world frame).
+    Numeric parameter 0: [rolling (m), torsional (m), drag (N s/m), fx, fy (N), ball mass
+    (kg)] (BallForceCoefficients' fields and the mass)."""
 
     def __init__(self, num_positions: int, num_states: int, balls: list, q_start, v_start,
                  mass: float, radius: float, table_z: float, coefficients: BallForceCoefficients):
         """q_start, v_start [N]: each ball's first index in the plant's q and v; mass (kg),
-        radius (m), table_z (m, the table top's world z): the world's."""
+        radius (m), table_z (m, the table top's world z): the world's; mass and
+        coefficients are the parameter's default."""
         super().__init__()
-        self._balls, self._c = list(balls), coefficients
+        self._balls = list(balls)
         self._q, self._v = np.asarray(q_start), np.asarray(v_start)
-        self._mass, self._radius, self._table_z = float(mass), float(radius), float(table_z)
+        self._radius, self._table_z = float(radius), float(table_z)
         self._nq = int(num_positions)
         self._state = self.DeclareVectorInputPort("state", num_states)
+        self._param = self.DeclareNumericParameter(BasicVector(_parameter(coefficients, mass)))
         self.DeclareAbstractOutputPort(
             "spatial_forces",
             lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()] * len(self._balls)),
             self._calc)
 
+    def set_coefficients(self, context, coefficients: BallForceCoefficients, mass: float):
+        """Write the coefficients and the ball mass (kg) into this system's context."""
+        context.get_mutable_numeric_parameter(self._param).SetFromVector(
+            _parameter(coefficients, mass))
+
     def _calc(self, context, output):
         x = self._state.Eval(context)
+        p = context.get_numeric_parameter(self._param).get_value()
+        c = BallForceCoefficients(p[0], p[1], p[2], (p[3], p[4]))
         z = x[self._q + 6]                                   # ball z (after the quaternion, x, y)
         vi = self._nq + self._v
         w = x[vi[:, None] + np.arange(3)]
         v = x[vi[:, None] + np.arange(3, 6)]
-        tau, f = ball_wrenches(w, v, z - self._radius - self._table_z, self._mass, self._c)
+        tau, f = ball_wrenches(w, v, z - self._radius - self._table_z, p[5], c)
         out = []
         for b, t, fi in zip(self._balls, tau, f):
             force = ExternallyAppliedSpatialForce()

@@ -43,7 +43,8 @@ from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import (
 SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is 0
 FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
-CACHE_MODELS = 24         # rollouts kept for this many parameter sets
+CACHE_MODELS = 400        # rollouts kept for this many parameter sets (a diagnosis asks
+                          # for ~260, ~50 MB; an evicted set is rolled out again)
 
 # the LCS patch of each finding (what it means for the controller's model)
 LCS_COUNTERPART = {
