@@ -34,6 +34,8 @@ from adaptive_c3.systems.contact.anitescu_lcs import AnitescuLinearizer, Contact
 RECORDING_STATE_NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz",
                          "vx", "vy", "vz", "wx", "wy", "wz")
 BODY_NAME = "object"
+APPROXIMATIONS = ("sap", "similar", "lagged")   # Drake's discrete contact approximations (not
+                                                # TAMSI: deprecated by Drake)
 
 
 @dataclass(frozen=True)
@@ -81,7 +83,9 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
                              relaxation_time: float | None = None,
                              friction: float | None = None,
                              hydroelastic_modulus: float | None = None,
-                             add_systems=None, geometry: str = "corner_spheres"
+                             add_systems=None, geometry: str = "corner_spheres",
+                             approximation: str = "sap",
+                             hunt_crossley_dissipation: float | None = None
                              ) -> RigidObjectPlant:
     """The box + table plant. time_step 0: continuous (for the linearizer); > 0: SAP.
     point_stiffness (N/m) and relaxation_time (s, SAP's dissipation) None: Drake's defaults.
@@ -90,19 +94,25 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     systems (e.g. force elements) to the diagram before it is built. geometry (point
     contact): "corner_spheres" (eight, up to four contacts on a face) or "box" (one Box:
     one contact point against the half space; SAP only, no contact_pairs for the
-    linearizer)."""
+    linearizer). approximation (time_step > 0): Drake's discrete contact approximation,
+    "sap" (dissipation: relaxation_time), "similar" or "lagged" (convex approximations of
+    Hunt-Crossley: dissipation hunt_crossley_dissipation, s/m; relaxation_time ignored).
+    hunt_crossley_dissipation None: Drake's default."""
+    if approximation not in APPROXIMATIONS:
+        raise ValueError(f"approximation must be one of {APPROXIMATIONS}, got {approximation!r}")
     if geometry not in ("corner_spheres", "box"):
         raise ValueError(f"geometry must be corner_spheres or box, got {geometry!r}")
     builder = DiagramBuilder()
     hydro = hydroelastic_modulus is not None
     config = MultibodyPlantConfig(time_step=float(time_step),
                                   contact_model="hydroelastic_with_fallback" if hydro else "point",
-                                  discrete_contact_approximation="sap" if time_step > 0 else "")
+                                  discrete_contact_approximation=approximation if time_step > 0 else "")
     plant, _ = AddMultibodyPlant(config, builder)
     plant.set_name("rigid_object_plant")
     mu = params.friction if friction is None else float(friction)
     props = ProximityProperties()
-    AddContactMaterial(props, point_stiffness=point_stiffness, friction=CoulombFriction(mu, mu))
+    AddContactMaterial(props, dissipation=hunt_crossley_dissipation,
+                       point_stiffness=point_stiffness, friction=CoulombFriction(mu, mu))
     if relaxation_time is not None:
         props.AddProperty("material", "relaxation_time", float(relaxation_time))
     table_props = ProximityProperties(props)

@@ -61,6 +61,8 @@ class DrakeBaseline:
     torsional_friction: float = 0.0  # m, torque per N of normal force against spin about the table normal
     rolling_resistance: float = 0.0  # m, torque per N of normal force against rotation in the table plane
     contact_geometry: str = "corner_spheres"   # point contact: "corner_spheres" or "box" (one contact point)
+    discrete_contact_approximation: str = "sap"   # Drake's: "sap", "similar" or "lagged"
+    hunt_crossley_dissipation: float = -1.0   # s/m, used by similar/lagged (not SAP); < 0 = Drake's default
 
 
 @dc.dataclass
@@ -123,6 +125,11 @@ def validate_rigid_object(s: RigidObjectScenario) -> None:
         need(finite(v) and 0 <= v < 0.1, f"drake.{key} must be in [0, 0.1) m, got {v}")
     need(d.contact_geometry in ("corner_spheres", "box"),
          f"drake.contact_geometry must be corner_spheres or box, got {d.contact_geometry!r}")
+    need(d.discrete_contact_approximation in ("sap", "similar", "lagged"),
+         "drake.discrete_contact_approximation must be sap, similar or lagged, got "
+         f"{d.discrete_contact_approximation!r}")
+    need(finite(d.hunt_crossley_dissipation),
+         "drake.hunt_crossley_dissipation must be finite (< 0: Drake's default)")
 
 
 register_task("rigid_object", RigidObjectScenario, validate_rigid_object)

@@ -16,8 +16,14 @@ The plant is models/rigid_object.py's, discrete with SAP:
   drake.hydroelastic_modulus Pa against a rigid table);
 - friction: drake.friction, < 0 = contact.friction (SAP uses one coefficient: the dynamic
   one; a static coefficient would be ignored, so there is one knob);
-- dissipation: SAP's linear Kelvin-Voigt term of relaxation time drake.relaxation_time
-  (s), 0 = Drake's default (0.1 s). SAP ignores Hunt & Crossley dissipation;
+- the discrete contact approximation drake.discrete_contact_approximation: `sap` (default)
+  or Drake's convex approximations of Hunt & Crossley, `similar` and `lagged`;
+- dissipation: under SAP, its linear Kelvin-Voigt term of relaxation time
+  drake.relaxation_time (s), 0 = Drake's default (0.1 s; SAP ignores Hunt & Crossley
+  dissipation); under similar/lagged, Hunt & Crossley dissipation
+  drake.hunt_crossley_dissipation (s/m), < 0 = Drake's default (the relaxation time is
+  ignored). A small relaxation time or dissipation lets impacts bounce, if the contact's
+  period (from the stiffness) is well above the step: implicit steps damp faster ones;
 - forces the plant lacks (systems of the diagram into its applied_spatial_force input):
   drake.viscous_drag (N s/m), drake.angular_drag (N m s), drake.external_force (N, world)
   (drake_forces.py); drake.torsional_friction and drake.rolling_resistance (m: torque per
@@ -91,12 +97,15 @@ class DrakeRigidSimulator:
         self.friction = float(d.friction) if d.friction >= 0 else self.params.friction
         self.point_stiffness = float(d.point_stiffness) if d.point_stiffness > 0 else None
         self.relaxation_time = float(d.relaxation_time) if d.relaxation_time > 0 else None
+        self.hunt_crossley_dissipation = (float(d.hunt_crossley_dissipation)
+                                          if d.hunt_crossley_dissipation >= 0 else None)
         self.model = build_rigid_object_plant(
             self.params, self.time_step, point_stiffness=self.point_stiffness,
             relaxation_time=self.relaxation_time, friction=self.friction,
             hydroelastic_modulus=(float(d.hydroelastic_modulus)
                                   if d.contact_model == "hydroelastic" else None),
-            geometry=d.contact_geometry,
+            geometry=d.contact_geometry, approximation=d.discrete_contact_approximation,
+            hunt_crossley_dissipation=self.hunt_crossley_dissipation,
             add_systems=force_systems(d, self.params.inertia_diag, self.time_step))
         self.plant = self.model.plant
         self.context = self.model.diagram.CreateDefaultContext()
