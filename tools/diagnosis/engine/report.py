@@ -15,18 +15,22 @@ PLOT_ROLLOUT_STEPS = 40
 
 
 def physical_interval(spec, cand, value, lo, hi, sd):
-    """(value, lo, hi, sd) of one fitted parameter read as the physical effect: the
-    model's measured model-form bias of that effect (spec.model_form_bias {label: (bias,
-    sd)}: what the model's best fit reads beyond the true size on data of another engine)
-    is taken off, and its spread added to the interval's sd in quadrature at the
-    interval's own quantile. Unchanged for effects without a listed bias."""
-    bias, s = (getattr(spec, "model_form_bias", None) or {}).get(cand.label(), (0.0, 0.0))
-    if not (bias or s):
+    """(value, lo, hi, sd) of one fitted parameter read as the physical effect through
+    the model's measured model form (spec.model_form_bias {label: (b, b_sd, gain,
+    gain_sd)}: on data of another engine the model's best fit reads b + gain * truth
+    for a truth above 0 and b + truth below it): the value is mapped back and the
+    spreads of b and gain are added to the interval's sd in quadrature, at the
+    interval's own quantile. Unchanged for effects without a listed model form."""
+    mf = (getattr(spec, "model_form_bias", None) or {}).get(cand.label())
+    if not mf:
         return value, lo, hi, sd
+    b, b_sd, gain, gain_sd = mf
     q = (hi - lo) / (2.0 * sd) if sd > 0 else 1.96
-    mid = 0.5 * (lo + hi) - bias
-    sd2 = float(np.hypot(sd, s))
-    return value - bias, mid - q * sd2, mid + q * sd2, sd2
+    g = gain if value > b else 1.0
+    v = (value - b) / g
+    sd2 = float(np.sqrt((sd / g) ** 2 + (b_sd / g) ** 2
+                        + (v * gain_sd / gain if v > 0 else 0.0) ** 2))
+    return float(v), float(v - q * sd2), float(v + q * sd2), sd2
 
 
 def _params(fit, spec, shift=None):
