@@ -78,6 +78,14 @@ class BallForces(LeafSystem):
         self._nq = int(num_positions)
         self._state = self.DeclareVectorInputPort("state", num_states)
         self._param = self.DeclareNumericParameter(BasicVector(_parameter(coefficients, mass)))
+        vi = self._nq + self._v
+        self._w_idx, self._v_idx = vi[:, None] + np.arange(3), vi[:, None] + np.arange(3, 6)
+        self._forces = []                  # one per ball, F_Bq_W rewritten on each output
+        for b in self._balls:
+            force = ExternallyAppliedSpatialForce()
+            force.body_index = b
+            force.p_BoBq_B = np.zeros(3)
+            self._forces.append(force)
         self.DeclareAbstractOutputPort(
             "spatial_forces",
             lambda: AbstractValue.Make([ExternallyAppliedSpatialForce()] * len(self._balls)),
@@ -93,18 +101,11 @@ class BallForces(LeafSystem):
         p = context.get_numeric_parameter(self._param).get_value()
         c = BallForceCoefficients(p[0], p[1], p[2], (p[3], p[4]))
         z = x[self._q + 6]                                   # ball z (after the quaternion, x, y)
-        vi = self._nq + self._v
-        w = x[vi[:, None] + np.arange(3)]
-        v = x[vi[:, None] + np.arange(3, 6)]
-        tau, f = ball_wrenches(w, v, z - self._radius - self._table_z, p[5], c)
-        out = []
-        for b, t, fi in zip(self._balls, tau, f):
-            force = ExternallyAppliedSpatialForce()
-            force.body_index = b
-            force.p_BoBq_B = np.zeros(3)
+        tau, f = ball_wrenches(x[self._w_idx], x[self._v_idx],
+                               z - self._radius - self._table_z, p[5], c)
+        for force, t, fi in zip(self._forces, tau, f):
             force.F_Bq_W = SpatialForce(t, fi)
-            out.append(force)
-        output.set_value(out)
+        output.set_value(self._forces)                       # copied into the output
 
 
 def add_ball_forces(world, coefficients: BallForceCoefficients):
