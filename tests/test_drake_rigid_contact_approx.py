@@ -49,3 +49,21 @@ def test_hunt_crossley_contact_bounces_and_its_dissipation_damps_it():
 def test_bad_contact_approximation_keys_are_rejected(drake, message):
     with pytest.raises(ScenarioError, match=message):
         validate_rigid_object(with_drake(RigidObjectScenario(), **drake))
+
+
+@pytest.mark.parametrize("radius", [1e-3, 8e-3])
+def test_corner_rounding_lowers_a_cube_balanced_on_an_edge(radius):
+    """The corner_rounding effect (contact.corner_radius) is geometry the drake plant
+    uses: a cube balanced on an edge (45 deg) rests with its centre at (h - r) sqrt 2 + r,
+    2.9 mm lower at r = 8 mm than at 1 mm (a sharp cube: h sqrt 2)."""
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_effects import (DRAKE_EFFECTS,
+                                                                           with_values)
+    effect = next(e for e in DRAKE_EFFECTS if e.name == "corner_rounding")
+    assert effect.refit == "drake.friction" and radius in effect.grid
+    sim = DrakeRigidSimulator(with_values(RigidObjectScenario(), {effect.key: radius}), DT)
+    h = SIDE / 2
+    x0 = np.zeros(13)
+    x0[3], x0[4] = np.cos(np.pi / 8), np.sin(np.pi / 8)       # 45 deg about body x
+    x0[2] = (h - radius) * np.sqrt(2) + radius
+    z = sim.rollout(x0, 10)[:, 2]
+    assert z[-1] == pytest.approx(x0[2], abs=2e-4)

@@ -63,9 +63,15 @@ DRAKE_EFFECTS = (
                                                0.42),
                 "1", "the friction coefficient differs from the simulation's",
                 lcs="contact.friction"),
-    RigidEffect("inertia_scale", "patch.inertia_scale", (0.8, 1.2, 1.4, 1.6, 1.8, 2.0),
+    RigidEffect("inertia_scale", "patch.inertia_scale", (0.8, 1.15, 1.3, 1.5, 1.7, 2.0),
                 "1", "the rotational inertia differs from a solid box's (a thin-walled cube "
-                "has 1.67x)", lcs="patch.inertia_scale"),
+                "has 1.67x; friction re-fitted with it: a slower-turning cube tumbles longer "
+                "and slides less after it lands)", lcs="patch.inertia_scale",
+                refit="drake.friction"),
+    RigidEffect("corner_rounding", "contact.corner_radius", (1e-3, 2e-3, 3e-3, 5e-3, 8e-3),
+                "m", "the object's edges and corners are rounded (radius of the corner "
+                "spheres, whose surfaces still reach the faces; friction re-fitted with it)",
+                lcs="contact.corner_radius", refit="drake.friction"),
     RigidEffect("table_offset", "patch.table_offset", (-3e-3, -2e-3, -1e-3, 0.0, 1e-3, 2e-3),
                 "m", "the table top is not where the simulation puts it (calibration)",
                 kind="nuisance", lcs="patch.table_offset"),
@@ -77,9 +83,10 @@ DRAKE_EFFECTS = (
                 "friction re-fitted with it)", kind="nuisance", refit="drake.friction",
                 lcs=f"{NO_LCS}: the LCS is rigid (contact.eps_c is a regulariser, not a "
                 "stiffness)"),
-    RigidEffect("relaxation_time", "drake.relaxation_time", (3e-3, 1e-2, 3e-2, 0.1, 0.3),
+    RigidEffect("relaxation_time", "drake.relaxation_time", (1e-3, 3e-3, 1e-2, 3e-2, 0.1, 0.3),
                 "s", "contact dissipates differently from Drake's default (SAP relaxation "
-                "time; friction re-fitted with it)", kind="nuisance", refit="drake.friction",
+                "time; 1-3 ms lets impacts bounce; friction re-fitted with it)",
+                kind="nuisance", refit="drake.friction",
                 lcs=f"{NO_LCS}: the LCS's impacts are perfectly inelastic"),
     RigidEffect("viscous_drag", "drake.viscous_drag", (0.0, 0.02, 0.05, 0.1, 0.2),
                 "N s/m", "a viscous drag on the body's velocity (air or a tether; Drake's "
@@ -113,7 +120,9 @@ DRAKE_NOT_IDENTIFIABLE = {
     "static_friction": "SAP uses one (dynamic) friction coefficient; a static one would be "
                        "ignored by the simulation, so it is not a knob",
     "hunt_crossley_dissipation": "SAP ignores it (its dissipation is the relaxation time, "
-                                 "which is tried)",
+                                 "which is tried, down to 1 ms, where impacts bounce); it "
+                                 "acts under drake.discrete_contact_approximation similar "
+                                 "or lagged, which a scenario may set",
     "sensor_delay": "the tosses have no input: a delay only shifts time, which the fitted "
                     "initial state absorbs",
 }
