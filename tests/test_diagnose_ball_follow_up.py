@@ -43,6 +43,22 @@ def test_every_proposal_is_a_gait_change():
     assert change["touchdown_s"] == 0.4 and change["episodes"] == 25     # its own + more
 
 
+def test_a_push_effect_against_none_asks_for_pushes_that_end_at_rest():
+    """Clean dev draws 12017 and 12021 ended {none, EE-ball mu, mass}; the follow-up the
+    harness merged (slow release pushes, light press) read mass 2.1 / 3.0 and mu 3.0 on
+    them (release pushes are where the LCS is worst), pushes ending at rest 1.02 / 0.74
+    and 0.72 / 1.04. A push-phase effect's proposal against `none` has no release, and
+    so has the merged change of such a set."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import against_none
+    props = [against_none(e)[1] for e in ("friction_coefficient", "mass_scale")]
+    merged = merge_changes(props)
+    for ch in props + [merged]:
+        assert ch.get("release_speed", [0.0, 0.0])[1] == 0.0 and ch["episodes"] == 25
+    assert merged["peak_accel"][0] >= 8.0
+    # a free-ball effect still asks for coasts
+    assert against_none("viscous_damping")[1]["release_speed"][1] > 0
+
+
 def test_release_pushes_let_the_ball_coast_clear_of_the_ee():
     from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
     ex = dict(release_speed=[0.1, 0.2], duration_s=2.4, directions="axes", episodes=4)
