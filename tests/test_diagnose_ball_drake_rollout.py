@@ -86,3 +86,14 @@ def test_a_batch_without_force_elements_is_shared_by_worlds_and_matches_a_built_
         np.testing.assert_allclose(R.simulate(world, none, X0, U, SUBSTEPS),
                                    _reference(world, none, X0, U), rtol=0, atol=1e-9)
     assert len(R._BATCHES) == 1                   # both on one 3-copy plant
+
+
+def test_windows_are_chunked_evenly_over_the_workers():
+    for W in (1, 3, 13, 40, 104, 1203):
+        for workers in (1, 2):
+            chunks = R._chunks(W, workers)
+            np.testing.assert_array_equal(np.concatenate(chunks), np.arange(W))
+            sizes = [len(c) for c in chunks]
+            assert max(sizes) <= R.COPIES and max(sizes) - min(sizes) <= 1
+            if W >= workers:
+                assert len(chunks) % workers == 0

@@ -29,10 +29,9 @@ from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import (BallWorld
 COPIES = 16               # at most this many windows per plant (a job): ~34 us CPU per
                           # window and SAP step (52 copies: ~41 us, SAP iterates one
                           # problem until its worst window converges; 4 copies: ~37 us)
-PAD = 4                   # plants have a multiple of PAD copies
 Z_ROWS = (2, 9)           # recording rows of the EE and ball z (shifted by the table height)
 _BATCHES: OrderedDict = OrderedDict()    # per process: Batch.key -> Batch
-_KEEP_BATCHES = 8
+_KEEP_BATCHES = 2 * COPIES   # every chunk size 1..COPIES, with and without forces
 
 
 class Batch:
@@ -149,27 +148,16 @@ def simulate(world: BallWorld, forces: BallForceCoefficients, X0: np.ndarray,
     return _batch(world, forces, W).run(np.asarray(X0, float), inputs, substeps)
 
 
-def _padded(world, forces, X0, inputs, substeps):
-    """simulate() on a plant of the next multiple of PAD copies (windows repeated), so
-    that calls with slightly different window counts share plants."""
-    W = len(X0)
-    size = -(-W // PAD) * PAD
-    idx = np.concatenate([np.arange(W), np.zeros(size - W, int)])
-    return simulate(world, forces, X0[idx], inputs[idx], substeps)[:W]
-
-
 def _job(job):
-    return _padded(*job)
+    return simulate(*job)
 
 
 def _chunks(W: int, workers: int) -> list:
-    """Window index chunks: at least one per worker (when W allows), at most COPIES
-    windows each, all but the last a multiple of PAD (no padded copies)."""
-    if W == 0:
-        return [np.arange(0)]
+    """Window index chunks of at most COPIES windows, a multiple of the workers in
+    number (when W allows) and of equal size within one window, so that the workers
+    finish together."""
     n = max(1, min(W, workers * -(-W // (COPIES * workers))))
-    size = PAD * -(-W // (n * PAD))
-    return [np.arange(i, min(i + size, W)) for i in range(0, W, size)]
+    return np.array_split(np.arange(W), n)
 
 
 class Roller:
@@ -184,7 +172,7 @@ class Roller:
         W = len(X0)
         chunks = _chunks(W, self.workers)
         if len(chunks) <= 1 or self.workers <= 1:
-            return np.concatenate([_padded(world, forces, X0[c], inputs[c], substeps)
+            return np.concatenate([simulate(world, forces, X0[c], inputs[c], substeps)
                                    for c in chunks], 0)
         if self._pool is None:
             self._pool = multiprocessing.get_context("fork").Pool(self.workers)
