@@ -166,3 +166,17 @@ def test_hydroelastic_box_rests_on_its_face():
     X = sim.rollout(x0, 120)
     assert X[-1, 2] == pytest.approx(0.0524, abs=1e-3)
     assert np.linalg.norm(X[-1, 7:10]) < 0.05
+
+
+def test_compare_of_one_backend_rolls_out_only_its_models():
+    """rigid_compare with models=("drake",): the drake diagnosis and its default/diagnosed
+    held-out comparison only (the LCS half costs ~30x as much)."""
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_compare import compare
+    scenario, _ = load_scenario(CUBE)
+    rec = concealed_tosses(scenario, episodes=12, steps=20, seed=1)
+    out = compare(rec, scenario, workers=1, drake_effects=("friction",), progress=False,
+                  models=("drake",))
+    assert list(out["diagnoses"]) == ["drake"]
+    for method in ("first-row", "ballistic"):
+        assert sorted(out["held_out"][method]) == ["drake_default", "drake_diagnosed"]
+        assert list(out["comparisons"][method]) == ["drake_default_to_diagnosed"]

@@ -120,3 +120,25 @@ def test_a_candidate_that_fails_validation_lets_the_next_best_be_checked(monkeyp
     assert [t["accepted"] for t in first["tries"]] == [False, True]
     assert [s["name"] for s in r["selected"]] == ["friction"]
     assert r["chosen"]["drake.friction"] == pytest.approx(0.25, abs=0.01)
+
+
+def test_paired_objective_judges_the_change_per_episode():
+    """The drake backend's fit objective is paired with the current model's errors: its
+    value at the current model is the unpaired one, a change of d on every episode moves
+    it by exactly d whatever the spread between episodes (trimming acts on the per-episode
+    changes, not on the errors), and the minimiser's bootstrap resamples the reference with
+    the episodes."""
+    from scipy.stats import trim_mean
+
+    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import (
+        PAIRED_FIT, TRIM, bootstrap_interval, objective)
+    assert "drake" in PAIRED_FIT and "lcs" not in PAIRED_FIT
+    rng = np.random.default_rng(0)
+    ref = rng.lognormal(2.0, 0.8, size=50)                 # % of size, a wide spread
+    assert objective(ref, ref) == pytest.approx(trim_mean(ref, TRIM))
+    S = np.vstack([ref - 0.7, ref + 0.2])
+    assert objective(S, ref) == pytest.approx(trim_mean(ref, TRIM) + np.array([-0.7, 0.2]))
+    grid = np.linspace(-1, 1, 9)
+    S = ref[None, :] + (grid[:, None] - 0.3) ** 2
+    lo, hi = bootstrap_interval(grid, S, rng, ref=ref)     # every episode changes alike:
+    assert (lo, hi) == pytest.approx((0.3, 0.3), abs=1e-9)  # no uncertainty from the spread

@@ -3,7 +3,9 @@ nominal LCS, diagnosed LCS, Drake's default and diagnosed Drake, each rolled out
 the same starts, under every initial-state method (the effects are fitted once, with
 the `fit_start` method). The figures issue 30 asks for on the real cube tosses:
 
-    python -m adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_compare RECORDING SCENARIO OUT.json
+    python -m adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_compare RECORDING SCENARIO OUT.json [drake|lcs]
+
+(a fourth argument: that backend only, its nominal and diagnosed models).
 
 Per model and start: the held-out summary (median / mean / p90 of the per-episode
 mean-over-time position error, % of size); per start: the paired per-episode difference
@@ -57,7 +59,7 @@ LCS_EFFECTS = ("friction_cone", "friction", "table_offset", "restitution", "iner
 
 def compare(rec, scenario, fit_episodes: dict | None = None, workers: int = 2, seed: int = 0,
             fit_start: str = "ballistic", lcs_effects=LCS_EFFECTS, drake_effects=None,
-            progress: bool | None = None, checkpoint=None) -> dict:
+            progress: bool | None = None, checkpoint=None, models=("drake", "lcs")) -> dict:
     """The comparison dict; checkpoint(out), if given, is called after each diagnosis.
     The LCS library is cut to LCS_EFFECTS by default (the LCS rollouts cost ~30x Drake's:
     the effects the full library never kept on these tosses - README - are left out)."""
@@ -65,6 +67,8 @@ def compare(rec, scenario, fit_episodes: dict | None = None, workers: int = 2, s
     out = {"fit_start": fit_start, "diagnoses": {}, "held_out": {}, "comparisons": {}}
     patched = {}
     for model, effects in (("drake", drake_effects), ("lcs", lcs_effects)):
+        if model not in models:
+            continue
         t0 = time.perf_counter()
         r = diagnose_rigid(rec, scenario, max_fit_episodes=fit_episodes[model], workers=workers,
                            seed=seed, progress=progress, effects=effects, model=model,
@@ -90,8 +94,10 @@ def compare(rec, scenario, fit_episodes: dict | None = None, workers: int = 2, s
     held = split["held_out"]
     out["held_out_episodes"] = len(held)
     rng = np.random.default_rng(seed)
-    runs = [("lcs_nominal", "lcs", scenario), ("lcs_diagnosed", "lcs", patched["lcs"]),
-            ("drake_default", "drake", scenario), ("drake_diagnosed", "drake", patched["drake"])]
+    runs = [(tag, model, scen) for tag, model, scen in (
+        ("lcs_nominal", "lcs", scenario), ("lcs_diagnosed", "lcs", patched.get("lcs")),
+        ("drake_default", "drake", scenario), ("drake_diagnosed", "drake", patched.get("drake")))
+        if model in models]
     for method in METHODS:
         x0s = initial_states({e: episodes[e][1] for e in held}, dt, method, params.half_size,
                              params.table_height)
@@ -100,25 +106,21 @@ def compare(rec, scenario, fit_episodes: dict | None = None, workers: int = 2, s
         per = {k: np.array([r["position_pct_mean"] for r in v["per_episode"]])
                for k, v in res.items()}
         out["comparisons"][method] = {
-            "drake_default_to_diagnosed": dict(
-                paired_drop=paired_gain(per["drake_default"], per["drake_diagnosed"], rng),
-                paired_difference=paired_difference(per["drake_default"],
-                                                    per["drake_diagnosed"], rng),
-                median_difference=median_difference(per["drake_default"],
-                                                    per["drake_diagnosed"], rng)),
-            "lcs_nominal_to_diagnosed": dict(
-                paired_drop=paired_gain(per["lcs_nominal"], per["lcs_diagnosed"], rng),
-                paired_difference=paired_difference(per["lcs_nominal"], per["lcs_diagnosed"],
-                                                    rng),
-                median_difference=median_difference(per["lcs_nominal"], per["lcs_diagnosed"],
-                                                    rng))}
+            f"{ref}_to_diagnosed": dict(
+                paired_drop=paired_gain(per[ref], per[diag], rng),
+                paired_difference=paired_difference(per[ref], per[diag], rng),
+                median_difference=median_difference(per[ref], per[diag], rng))
+            for ref, diag in (("drake_default", "drake_diagnosed"),
+                              ("lcs_nominal", "lcs_diagnosed")) if ref in per}
     return out
 
 
 def main(argv=None) -> int:
     from adaptive_c3.scenarios.schema import load_scenario
     from adaptive_c3.tools.recording import load_recording
-    recording, scenario_path, out_path = (argv or sys.argv[1:])[:3]
+    args = list(argv or sys.argv[1:])
+    recording, scenario_path, out_path = args[:3]
+    models = tuple(args[3:4]) or ("drake", "lcs")
     scenario, _ = load_scenario(scenario_path, [])
     t0 = time.perf_counter()
 
@@ -126,7 +128,7 @@ def main(argv=None) -> int:
         with open(out_path, "w") as f:
             json.dump(result, f, indent=1, default=float)
 
-    result = compare(load_recording(recording), scenario, checkpoint=save)
+    result = compare(load_recording(recording), scenario, checkpoint=save, models=models)
     result["wall_s"] = time.perf_counter() - t0
     save(result)
     for method, models in result["held_out"].items():
