@@ -196,6 +196,28 @@ def test_the_ee_ball_offset_is_reported_through_the_lcs_model_form():
     assert p["value"] == pytest.approx(3.55e-3) and p["ci95"] == pytest.approx([3.22e-3, 3.88e-3])
 
 
+def test_a_pair_with_a_calibration_sized_offset_is_no_choice():
+    """Dev draw 12038 (a -0.78 mm table offset; EE and ball radii 0.26 / 0.23 mm off)
+    was answered `contact_offset[ball_table] + contact_offset[ee_ball]` with 0.70 mm on
+    the EE-ball pair: inside the +-1 mm calibration tolerance that part is calibration,
+    as it is for r_comp; the table offset competes on its own."""
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.engine.fit import _calibration_sized
+    spec = ball_spec(load_scenario(BALL)[0])
+
+    def fit(cands, values):
+        values = np.array(values, float)
+        return Fit(tuple(Candidate(*c) for c in cands), values, np.zeros((len(values), 2)),
+                   np.zeros(len(values)), 0.0)
+    table, ee = ("contact_offset", "ball_table"), ("contact_offset", "ee_ball")
+    assert _calibration_sized(fit([table, ee], [-6.2e-4, 7.0e-4]), spec)
+    assert _calibration_sized(fit([("mass_scale", "ball"), ee], [1.5, 4e-4]), spec)
+    assert not _calibration_sized(fit([table, ee], [-2.2e-3, 1.4e-3]), spec)
+    assert not _calibration_sized(fit([table], [-6.2e-4]), spec)      # a single competes
+    assert not _calibration_sized(fit([("mass_scale", "ball"), ("viscous_damping", "ball")],
+                                      [1.5, 4e-4]), spec)
+
+
 @pytest.fixture(scope="module")
 def delayed_force_report(tmp_path_factory):
     """The CLI on a drawn external force with an 8 ms sensor delay and a softer contact."""

@@ -425,10 +425,14 @@ def _at_bound(f, c, spec, rel: float = 0.02) -> bool:
 def _calibration_sized(f, spec) -> bool:
     """A fit with an r_comp whose offset on some pair is within the calibration
     tolerance: that pair's part is calibration (a nuisance), not an effect; the other
-    pair's contact_offset is the effect (chosen on its own merit), so it is no choice."""
+    pair's contact_offset is the effect (chosen on its own merit), so it is no choice.
+    The same for a pair of effects with a contact_offset within the tolerance (dev draw
+    12038: a -0.78 mm table offset was answered `contact_offset[ball_table] +
+    contact_offset[ee_ball]`, the EE-ball part 0.70 mm: the draw's radius errors)."""
     from adaptive_c3.tools.diagnosis.backends.effects import CALIBRATION_TOLERANCE
-    return any(c.name == "r_comp" and np.any(np.abs(p) < CALIBRATION_TOLERANCE)
-               for c, p in f.effects(spec))
+    effects = f.effects(spec)
+    return any((c.name == "r_comp" or (c.name == "contact_offset" and len(effects) > 1))
+               and np.any(np.abs(p) < CALIBRATION_TOLERANCE) for c, p in effects)
 
 
 def fit_nuisance(prob: Problem) -> list:
