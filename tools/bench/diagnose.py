@@ -19,9 +19,12 @@ Rows
                                    10, effects friction and table_offset, 2 workers, with the
                                    lcs and the drake backend; the drake row carries
                                    baseline/speedup against the lcs row.
+The two ball rows carry `load`, the 1-minute load average as the row started: other work
+shares the 2 cores, and the drake/lcs ratio of one run is the figure that travels.
 """
 from __future__ import annotations
 
+import os
 import tempfile
 import time
 from dataclasses import replace
@@ -52,11 +55,13 @@ def run_bench(quick: bool = False) -> list[dict]:
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams, ball_spec
     scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
     rec, truth, _ = concealed_draw(SEED, params=ModelParams.from_scenario(scenario))
+    load = os.getloadavg()[0]
     runs = [_timed(rec, ball_spec(scenario)) for _ in range(1 if quick else 3)]
     wall = float(np.median([r[0] for r in runs]))
     row = {"name": "diagnose/ball/15ep", "median_ms": wall * 1e3, "wall_s": wall,
            "diagnose_s": float(np.median([r[1] for r in runs])), "samples": len(rec.t),
-           "episodes": int(len(np.unique(rec.episode))), "truth": truth.name, "selected": runs[0][2]}
+           "episodes": int(len(np.unique(rec.episode))), "truth": truth.name, "selected": runs[0][2],
+           "load": load}
     rows = [row]
     if not quick:
         slow = replace(ball_spec(scenario), linear_refits=False, fit_tolerance=(1e-10, 1e-9))
@@ -76,13 +81,14 @@ def _drake_ball_row(rec, scenario, lcs_row: dict) -> dict:
         a, b = resource.getrusage(resource.RUSAGE_SELF), resource.getrusage(resource.RUSAGE_CHILDREN)
         return a.ru_utime + a.ru_stime + b.ru_utime + b.ru_stime
     spec = drake_ball_spec(scenario, workers=2)
+    load = os.getloadavg()[0]
     c0 = cpu()
     try:
         wall, diag, sel = _timed(rec, spec)
     finally:
         spec.close()           # its workers' CPU time counts once they are waited for
     return {"name": "diagnose/ball/drake/15ep", "median_ms": wall * 1e3, "wall_s": wall,
-            "diagnose_s": diag, "cpu_s": cpu() - c0, "selected": sel,
+            "diagnose_s": diag, "cpu_s": cpu() - c0, "selected": sel, "load": load,
             "baseline": lcs_row["name"], "speedup": lcs_row["wall_s"] / wall}
 
 
