@@ -80,13 +80,23 @@ class BallPlant:
         return X
 
 
+def proximity_properties(stiffness: float, relaxation_time: float, mu: float):
+    """A geometry's contact material: point stiffness (N/m), SAP relaxation time (s) and
+    friction mu (static = dynamic)."""
+    from pydrake.geometry import AddContactMaterial, ProximityProperties
+    from pydrake.multibody.plant import CoulombFriction
+    props = ProximityProperties()
+    AddContactMaterial(props, point_stiffness=stiffness, friction=CoulombFriction(mu, mu))
+    props.AddProperty("material", "relaxation_time", relaxation_time)
+    return props
+
+
 def build_ball_plant(w: BallWorld, copies: int = 1, add_systems=None) -> BallPlant:
     """The world's diagram (see the module doc). add_systems(builder, plant, ball_bodies):
     a hook that adds systems (e.g. force elements) before the diagram is built."""
-    from pydrake.geometry import AddContactMaterial, Box, ProximityProperties, Sphere
+    from pydrake.geometry import Box, Sphere
     from pydrake.math import RigidTransform
-    from pydrake.multibody.plant import (AddMultibodyPlant, CoulombFriction,
-                                         MultibodyPlantConfig)
+    from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
     from pydrake.multibody.tree import PrismaticJoint, SpatialInertia
     from pydrake.systems.framework import DiagramBuilder
     builder = DiagramBuilder()
@@ -95,10 +105,7 @@ def build_ball_plant(w: BallWorld, copies: int = 1, add_systems=None) -> BallPla
         builder)
 
     def props(m):
-        pr = ProximityProperties()
-        AddContactMaterial(pr, point_stiffness=w.stiffness, friction=CoulombFriction(m, m))
-        pr.AddProperty("material", "relaxation_time", w.relaxation_time)
-        return pr
+        return proximity_properties(w.stiffness, w.relaxation_time, m)
     ees, balls = [], []
     for i in range(copies):
         tag = "" if i == 0 else f"_{i}"

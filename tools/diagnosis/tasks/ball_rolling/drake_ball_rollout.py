@@ -23,8 +23,8 @@ import numpy as np
 
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_forces import (
     BallForceCoefficients, add_ball_forces)
-from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import (BallWorld,
-                                                                      build_ball_plant)
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import (
+    BallWorld, build_ball_plant, proximity_properties)
 
 COPIES = 16               # at most this many windows per plant (a job): ~34 us CPU per
                           # window and SAP step (52 copies: ~41 us, SAP iterates one
@@ -75,7 +75,7 @@ class Batch:
         for group, mu in (("ee", "mu_ee"), ("ball", "mu_ball"), ("table", "mu_table")):
             new = (world.stiffness, world.relaxation_time, getattr(world, mu))
             if new != (old.stiffness, old.relaxation_time, getattr(old, mu)):
-                props = _proximity(*new)
+                props = proximity_properties(*new)
                 for gid in self.geometries[group]:
                     self.sg.AssignRole(self.sgctx, self.source, gid, props, self._replace)
         if world.ee_radius != old.ee_radius:
@@ -113,16 +113,6 @@ class Batch:
         except RuntimeError:
             pass                                   # the steps not reached stay NaN
         return out
-
-
-def _proximity(stiffness: float, relaxation_time: float, mu: float):
-    """The proximity properties ball_plant.build_ball_plant gives a geometry."""
-    from pydrake.geometry import AddContactMaterial, ProximityProperties
-    from pydrake.multibody.plant import CoulombFriction
-    props = ProximityProperties()
-    AddContactMaterial(props, point_stiffness=stiffness, friction=CoulombFriction(mu, mu))
-    props.AddProperty("material", "relaxation_time", relaxation_time)
-    return props
 
 
 def _batch(world: BallWorld, forces: BallForceCoefficients, copies: int) -> Batch:
