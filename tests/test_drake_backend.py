@@ -179,3 +179,12 @@ def test_compare_of_one_backend_rolls_out_only_its_models():
     for method in ("first-row", "ballistic"):
         assert sorted(out["held_out"][method]) == ["drake_default", "drake_diagnosed"]
         assert list(out["comparisons"][method]) == ["drake_default_to_diagnosed"]
+
+
+def test_run_of_a_rigid_object_scenario_is_one_line(tmp_path, capsys):
+    """`run` has no controller for a rigid_object scenario (a patched one included): one
+    line naming evaluate, exit 2, no results folder (it was a KeyError traceback)."""
+    assert cli.main(["run", str(CUBE), "--out", str(tmp_path / "r")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "adaptive-c3 evaluate" in err
+    assert not (tmp_path / "r").exists()

@@ -25,6 +25,10 @@ def run_scenario(path, out=None, overrides=(), meshcat: bool = False,
     still writes its results for the time simulated, with summary["interrupted"] true."""
     import importlib
     scenario, text = load_scenario(path, overrides)
+    if scenario.task not in TASK_RUNNERS:
+        raise UserError(f"'{scenario.task}' scenarios have no controller to run: compare them "
+                        f"with a recording (adaptive-c3 evaluate RECORDING --scenario {path} "
+                        "[--model drake], or diagnose)")
     if (meshcat or meshcat_port is not None) and scenario.task not in MESHCAT_TASKS:
         raise UserError(f"--meshcat is available for the {', '.join(MESHCAT_TASKS)} task, "
                         f"not '{scenario.task}'")
