@@ -188,3 +188,21 @@ def test_run_of_a_rigid_object_scenario_is_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.count("\n") == 1 and "adaptive-c3 evaluate" in err
     assert not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("flags, fitted", [([], 30), (["--model", "drake"], 60),
+                                           (["--model", "drake", "--fit-episodes", "7"], 7)])
+def test_diagnose_fits_on_60_tosses_by_default_with_drake(tmp_path, monkeypatch, flags, fitted):
+    """--fit-episodes defaults to 60 with --model drake (its rollouts are ~30x cheaper than
+    the LCS's; the real-toss comparison fits on 60), 30 with the LCS."""
+    import adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose as rd
+    import adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_report as rr
+    seen = {}
+    monkeypatch.setattr(rd, "diagnose_rigid", lambda *a, **k: seen.update(k) or {"rollouts": {}})
+    monkeypatch.setattr(rr, "write_report", lambda *a, **k: {"summary": "ok"})
+    scenario, _ = load_scenario(CUBE)
+    path = save_recording(tmp_path / "t.npz", concealed_tosses(scenario, episodes=6, steps=5,
+                                                               seed=1))
+    assert cli.main(["diagnose", str(path), "--scenario", str(CUBE), "--out",
+                     str(tmp_path / "d"), *flags]) == 0
+    assert seen["max_fit_episodes"] == fitted

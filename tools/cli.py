@@ -137,8 +137,9 @@ def build_parser() -> argparse.ArgumentParser:
                       "as it is and tuned on the fit episodes")
     diag.add_argument("--held-out", type=float, default=0.3,
                       help="rigid_object: fraction of episodes held out (default 0.3)")
-    diag.add_argument("--fit-episodes", type=int, default=30,
-                      help="rigid_object: at most this many episodes to fit on (default 30)")
+    diag.add_argument("--fit-episodes", type=int, default=None,
+                      help="rigid_object: at most this many episodes to fit on (default 30; "
+                      "60 with --model drake)")
     diag.add_argument("--workers", type=int, default=2,
                       help="rigid_object, and ball_rolling with --model drake: processes (default 2)")
     diag.add_argument("--effects", default=None,

@@ -24,8 +24,8 @@ import numpy as np
 from adaptive_c3.models.rigid_object import RigidObjectParams
 from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import recording_episodes
 from adaptive_c3.tools.diagnosis.tasks.rigid_object.initial_state import METHODS, initial_states
-from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import (diagnose_rigid, held_out_runs,
-                                                        paired_gain)
+from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_diagnose import (
+    DEFAULT_FIT_EPISODES, diagnose_rigid, held_out_runs, paired_gain)
 
 BOOTSTRAP = 2000
 
@@ -63,7 +63,7 @@ def compare(rec, scenario, fit_episodes: dict | None = None, workers: int = 2, s
     """The comparison dict; checkpoint(out), if given, is called after each diagnosis.
     The LCS library is cut to LCS_EFFECTS by default (the LCS rollouts cost ~30x Drake's:
     the effects the full library never kept on these tosses - README - are left out)."""
-    fit_episodes = fit_episodes or {"lcs": 30, "drake": 60}
+    fit_episodes = fit_episodes or DEFAULT_FIT_EPISODES
     out = {"fit_start": fit_start, "diagnoses": {}, "held_out": {}, "comparisons": {}}
     patched = {}
     for model, effects in (("drake", drake_effects), ("lcs", lcs_effects)):

@@ -65,6 +65,8 @@ BOOTSTRAP = 2000
 TRIM = 0.2               # fraction of episodes cut at each end by the fit objective
 FINE_POINTS = 4          # values added between the coarse grid's best point's neighbours
 REFIT_FACTORS = (0.94, 0.97, 1.0, 1.03)   # a two-parameter effect's refit key, x its value
+DEFAULT_FIT_EPISODES = {"lcs": 30, "drake": 60}   # diagnose's --fit-episodes (a Drake
+                         # rollout costs ~1/30 of an LCS one; 60 cube tosses: 611 CPU-s)
 PAIRED_FIT = ("drake",)  # backends fitted by the paired objective (see objective): Drake's
                          # default is within ~1 % of size of its candidates on the real tosses,
                          # a change far below the toss-to-toss spread the unpaired one carries
@@ -350,16 +352,19 @@ def cmd_diagnose_rigid(args, scenario, scenario_text: str, rec) -> int:
     from adaptive_c3.tools.user_input import UserError
     if not 0 < args.held_out < 1:
         raise UserError(f"--held-out must be in (0, 1), got {args.held_out}")
-    if args.fit_episodes < 2 or args.workers < 1:
+    model = check_model(getattr(args, "model", None) or "lcs")
+    fit_episodes = (args.fit_episodes if args.fit_episodes is not None
+                    else DEFAULT_FIT_EPISODES[model])
+    if fit_episodes < 2 or args.workers < 1:
         raise UserError("--fit-episodes must be >= 2 and --workers >= 1")
     out = Path(args.out) if args.out else Path("runs") / (
         f"diagnose-{Path(args.recording).stem}-{time.strftime('%Y%m%d-%H%M%S')}")
     out.mkdir(parents=True, exist_ok=True)
     result = diagnose_rigid(rec, scenario, held_out_fraction=args.held_out,
-                            max_fit_episodes=args.fit_episodes, workers=args.workers,
+                            max_fit_episodes=fit_episodes, workers=args.workers,
                             baseline=args.baseline == "drake",
                             effects=tuple(args.effects.split(",")) if args.effects else None,
-                            model=check_model(getattr(args, "model", None) or "lcs"),
+                            model=model,
                             initial_state=getattr(args, "initial_state", None) or "ballistic")
     report = write_report(out, result, scenario_text, result["rollouts"])
     print(report["summary"])
