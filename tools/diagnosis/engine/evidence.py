@@ -370,9 +370,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> Non
             continue
         where = " (the interval from the free windows)" if f.cands in free else ""
         nominal = float(c.nominal(spec)[0])
-        lo, hi = np.asarray(free.get(f.cands, f).ci, float)[0]
-        add = shift.get(c.target, 0.0) if c.name == "contact_offset" else 0.0
         src = free.get(f.cands, f)
+        lo, hi = np.asarray(src.ci, float)[0]
+        add = shift.get(c.target, 0.0) if c.name == "contact_offset" else 0.0
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
         if nominal - lo >= size[0] or hi - nominal >= size[1]:
