@@ -166,17 +166,17 @@ def test_report_shows_the_value_refitted_per_phase():
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.engine.report import _params
+    from adaptive_c3.tools.diagnosis.engine.report import effect_params
     spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
     fit = SimpleNamespace(cands=[Candidate("contact_offset", "ee_ball")],
                           values=np.array([2.5e-3]), ci=np.array([[2.0e-3, 3.0e-3]]),
                           sd=np.array([2e-4]),
                           phase_estimates={"push_light": [2.2e-3], "push_firm": [2.9e-3]})
-    row = _params(fit, spec, {"ee_ball": 1e-4})[0]
+    row = effect_params(fit, spec, {"ee_ball": 1e-4})[0]
     assert row["by_phase"] == {"push_light": pytest.approx([2.3e-3]),
                                "push_firm": pytest.approx([3.0e-3])}
     fit.phase_estimates = None
-    assert "by_phase" not in _params(fit, spec)[0]
+    assert "by_phase" not in effect_params(fit, spec)[0]
 
 
 def test_mass_is_judged_against_its_own_spurious_level():

@@ -97,6 +97,55 @@ def test_an_effect_joins_the_set_once():
     assert len(judged["separating_excitation"]) == 1
 
 
+def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident():
+    """Set 3 (seeds 51000-51047) named effects whose own 95 % interval held the model's
+    value: clean draw 51028, EE-ball offset 0.11 mm [-2.25, 2.48]; 51029 (rolling
+    resistance), drag 9.15 [-10.5, 28.8]. Such an effect is as consistent with the data
+    as the model without it: the verdict is ambiguous with `none`, and a pair with an
+    unsupported member is ambiguous with the single fit of the other member."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import require_support
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    spec = ball_spec(load_scenario(BALL)[0])
+    drag = _fit("viscous_damping", "ball", NONE - 20 + RNG.normal(0, 1, 30), NONE)
+    drag.values[:], drag.ci[:], drag.sd[:] = 0.09, [-0.1, 0.28], 0.097
+    judged = verdict([drag], drag, NONE_EVAL, 0.1)
+    assert judged["verdict"] == "named"
+    require_support(judged, spec, drag, [drag], NONE_EVAL)
+    assert judged["verdict"] == "ambiguous"
+    assert [a["name"] for a in judged["ambiguous"]] == ["viscous_damping", "none"]
+    assert "holds the model's value" in judged["ambiguous"][1]["note"]
+    assert judged["separating_excitation"][0]["between"] == ["viscous_damping", "none"]
+    assert judged["separating_excitation"][0]["excitation"]["release_speed"] == [0.15, 0.25]
+    # the same effect with an interval clear of zero stays named
+    drag.ci[:] = [0.05, 0.13]
+    judged = verdict([drag], drag, NONE_EVAL, 0.1)
+    require_support(judged, spec, drag, [drag], NONE_EVAL)
+    assert judged["verdict"] == "named"
+    # an offset is read as the total offset: a calibration shift can carry it off zero
+    off = _fit("contact_offset", "ball_table", NONE - 20 + RNG.normal(0, 1, 30), NONE)
+    off.values[:], off.ci[:], off.sd[:] = 2e-4, [-3e-4, 7e-4], 2.5e-4
+    judged = verdict([off], off, NONE_EVAL, 0.1)
+    require_support(judged, spec, off, [off], NONE_EVAL, shift={"ball_table": 9e-4})
+    assert judged["verdict"] == "named"
+    require_support(judged, spec, off, [off], NONE_EVAL)
+    assert [a["name"] for a in judged["ambiguous"]] == ["contact_offset", "none"]
+    # a pair (51005: the true EE-ball offset with a mass) whose mass holds 1
+    ee = _fit("contact_offset", "ee_ball", NONE - 10 + RNG.normal(0, 0.5, 30), NONE)
+    best = _fit("contact_offset", "ee_ball", NONE - 20 + RNG.normal(0, 0.5, 30), NONE)
+    pair = Fit((Candidate("contact_offset", "ee_ball"), Candidate("mass_scale", "ball")),
+               np.array([3e-3, 1.1]), np.array([[2e-3, 4e-3], [0.7, 1.5]]),
+               np.array([5e-4, 0.2]), 0.0)
+    for k in ("test_cluster_ssr", "test_ssr", "test_n", "score", "reduction", "z_vs_none"):
+        setattr(pair, k, getattr(best, k))
+    judged = verdict([ee, pair], pair, NONE_EVAL, 0.1)
+    assert judged["verdict"] == "named"
+    require_support(judged, spec, pair, [ee, pair], NONE_EVAL)
+    assert [a["name"] for a in judged["ambiguous"]][1] == "contact_offset"
+    assert judged["ambiguous"][1]["target"] == "ee_ball"
+    assert "mass_scale[ball]" in judged["ambiguous"][1]["note"]
+    assert judged["separating_excitation"][-1]["excitation"]["peak_accel"] == [8.0, 12.0]
+
+
 def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():
     """`none` claims the data exclude every effect of a size that matters. Clean
     calibration draw 201: mass 95 % interval 0.61-1.69 (nothing cut the held-out SSR);
@@ -174,25 +223,25 @@ def test_the_ee_ball_offset_is_reported_through_the_lcs_model_form():
     the model's back, the model form's spread widens the interval; the model's own
     value stays for the patch."""
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.engine.report import _params
+    from adaptive_c3.tools.diagnosis.engine.report import effect_params
     spec = ball_spec(load_scenario(BALL)[0])
     f = Fit((Candidate("contact_offset", "ee_ball"),), np.array([3.55e-3]),
             np.array([[3.22e-3, 3.88e-3]]), np.array([1.68e-4]), 0.0)
-    p = _params(f, spec)[0]["params"][0]
+    p = effect_params(f, spec)[0]["params"][0]
     lo, hi = p["ci95"]
     assert lo < 2.89e-3 < hi and p["value"] == pytest.approx((3.55e-3 - 1.6e-4) / 1.25)
     assert p["model_value"] == pytest.approx(3.55e-3) and hi - lo > 3.88e-3 - 3.22e-3
     # a draw without an offset (12021: +0.09 mm read for +0.07 mm) stays well inside
     # the 1 mm that matters; a negative one is only shifted
     f.values[:], f.ci[:] = 0.09e-3, [[-0.1e-3, 0.28e-3]]
-    p = _params(f, spec)[0]["params"][0]
+    p = effect_params(f, spec)[0]["params"][0]
     assert -0.6e-3 < p["ci95"][0] < 0.0 < p["ci95"][1] < 0.6e-3
     f.values[:], f.ci[:] = -0.19e-3, [[-0.5e-3, 0.12e-3]]
-    assert _params(f, spec)[0]["params"][0]["value"] == pytest.approx(-0.35e-3)
+    assert effect_params(f, spec)[0]["params"][0]["value"] == pytest.approx(-0.35e-3)
     # the table offset (no listed model form) is reported as fitted
     f.values[:], f.ci[:] = 3.55e-3, [[3.22e-3, 3.88e-3]]
     f.cands = (Candidate("contact_offset", "ball_table"),)
-    p = _params(f, spec)[0]["params"][0]
+    p = effect_params(f, spec)[0]["params"][0]
     assert p["value"] == pytest.approx(3.55e-3) and p["ci95"] == pytest.approx([3.22e-3, 3.88e-3])
 
 
@@ -312,7 +361,7 @@ def test_calibration_offset_is_a_nuisance_only_and_folds_into_a_selected_offset(
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
     from adaptive_c3.tools.diagnosis.backends.effects import EFFECTS, Candidate, applicable_candidates
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.engine.report import _params
+    from adaptive_c3.tools.diagnosis.engine.report import effect_params
     spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
     assert EFFECTS["calibration_offset"].nuisance_only
     assert ("calibration_offset", "ball_table") in spec.nuisance
@@ -321,15 +370,15 @@ def test_calibration_offset_is_a_nuisance_only_and_folds_into_a_selected_offset(
     off = SimpleNamespace(cands=[Candidate("contact_offset", "ball_table")],
                           values=np.array([2e-3]), ci=np.array([[1.8e-3, 2.2e-3]]),
                           sd=np.array([1e-4]))
-    p = _params(off, spec, shift)[0]["params"][0]
+    p = effect_params(off, spec, shift)[0]["params"][0]
     assert p["value"] == pytest.approx(2.4e-3) and p["ci95"] == pytest.approx([2.2e-3, 2.6e-3])
     rc = SimpleNamespace(cands=[Candidate("r_comp", "all_pairs")], values=np.array([1e-3, 1e-3]),
                          ci=np.zeros((2, 2)), sd=np.zeros(2))
-    vals = [q["value"] for q in _params(rc, spec, shift)[0]["params"]]
+    vals = [q["value"] for q in effect_params(rc, spec, shift)[0]["params"]]
     assert vals == pytest.approx([1e-3, 1.4e-3])           # pairs: ee_ball, ball_table
     mu = SimpleNamespace(cands=[Candidate("friction_coefficient", "ball_table")],
                          values=np.array([0.5]), ci=np.array([[0.4, 0.6]]), sd=np.array([0.05]))
-    assert _params(mu, spec, shift)[0]["params"][0]["value"] == 0.5
+    assert effect_params(mu, spec, shift)[0]["params"][0]["value"] == 0.5
 
 
 @pytest.mark.parametrize("seed, effect, calibration_kept, named", [

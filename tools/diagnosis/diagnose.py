@@ -39,8 +39,8 @@ from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
 from adaptive_c3.tools.diagnosis.engine.evidence import (evidence_windows, free_ball_verdict,
-                                                  not_excluded, widen_for_phases,
-                                                  window_phases)
+                                                  not_excluded, require_support,
+                                                  widen_for_phases, window_phases)
 from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
                                              widen_for_nuisance)
 from adaptive_c3.tools.diagnosis.engine.locate import (contact_summary, estimate_noise, locate,
@@ -250,11 +250,13 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION),
         free_prob=long_problem(rec, spec, prob, P0, sigma, stride))
     from adaptive_c3.tools.diagnosis.engine.report import calibration_shift
-    not_excluded(judged, spec, fits, none_eval, fits_free,
-                 shift=calibration_shift(dict(nuisance=nuisance)))
+    shift = calibration_shift(dict(nuisance=nuisance))
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)
+    require_support(judged, spec, chosen, fits, none_eval, shift)
+    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift)
+    if chosen is not None:
         Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
                                               none_scored[3] - chosen.test_window_ssr,

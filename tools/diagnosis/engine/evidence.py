@@ -326,18 +326,21 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     return chosen_f, judged_f, fits_f, (sub, none_f)
 
 
-def _join(judged, first: dict, other: dict) -> None:
+def _join(judged, first: dict, other: dict, how: tuple | None = None) -> None:
     """Make the verdict ambiguous between `first` (kept first) and `other` (once: an
     effect already in the set, e.g. a near miss on all windows and on the free ones, is
-    not listed again)."""
+    not listed again); `how`: the separating (text, gait change), by default what tells
+    an effect from `none`, or what gives `other` more evidence."""
     if any((a["name"], a["target"]) == (other["name"], other["target"])
            for a in judged["ambiguous"]):
         return
     if not judged["ambiguous"]:
         judged["ambiguous"] = [first]
     judged["ambiguous"].append(other)
-    how = against_none(other["name"]) if first["name"] == "none" else \
-        MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)
+    if how is None:
+        how = against_none(other["name"]) if first["name"] == "none" else \
+            against_none(first["name"]) if other["name"] == "none" else \
+            MORE_EVIDENCE.get(other["name"], DEFAULT_SEPARATION)
     judged["separating_excitation"].append(proposal([first["name"], other["name"]], how))
     judged["verdict"] = "ambiguous"
 
@@ -415,3 +418,38 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     add_to_interval(fit, est.std(axis=0, ddof=1))
     fit.phase_estimates = dict(zip(keep, est.tolist()))
     return fit
+
+
+def supported_components(spec, fit, shift=None) -> list[bool]:
+    """Per effect of the fit: whether its physical 95 % interval (report.effect_params:
+    through the model's measured model form, a contact offset read as the total offset
+    from the user's model) excludes the model's own value for at least one parameter."""
+    from adaptive_c3.tools.diagnosis.engine.report import effect_params
+    out = []
+    for c, row in zip(fit.cands, effect_params(fit, spec, shift)):
+        nominal = c.nominal(spec)
+        out.append(any(not (p["ci95"][0] <= float(n) <= p["ci95"][1])
+                       for p, n in zip(row["params"], nominal)))
+    return out
+
+
+def require_support(judged, spec, chosen, fits, none_eval, shift=None) -> None:
+    """A chosen effect is named only while its own (widened) 95 % interval excludes the
+    model's value: one whose interval holds it is as consistent with the data as the
+    model without it. A single such effect makes the verdict ambiguous with `none`; a
+    pair with one such member, ambiguous with the single fit of the other member (with
+    `none` when both are)."""
+    if chosen is None:
+        return
+    ok = supported_components(spec, chosen, shift)
+    if all(ok):
+        return
+    held = [c.label() for c, k in zip(chosen.cands, ok) if not k]
+    note = f"{', '.join(held)}: its 95 % interval holds the model's value"
+    first = fit_row(chosen, none_eval)
+    kept = [c for c, k in zip(chosen.cands, ok) if k]
+    single = next((f for f in fits if len(kept) == 1 and list(f.cands) == kept), None)
+    other = fit_row(single, none_eval) if single is not None else fit_row(None, none_eval)
+    how = MORE_EVIDENCE.get(chosen.cands[ok.index(False)].name, DEFAULT_SEPARATION) \
+        if single is not None else None
+    _join(judged, first, dict(other, note=note), how)

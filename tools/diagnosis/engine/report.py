@@ -33,7 +33,7 @@ def physical_interval(spec, cand, value, lo, hi, sd):
     return float(v), float(v - q * sd2), float(v + q * sd2), sd2
 
 
-def _params(fit, spec, shift=None):
+def effect_params(fit, spec, shift=None):
     """The fit's effects as report rows. shift {pair: m}: calibration offsets fitted as
     nuisance, added to a contact_offset / r_comp of the same pair (whose value is then
     the offset from the user's model). `by_phase`: the value refitted on each phase's
@@ -90,7 +90,7 @@ def candidate_rows(result, key: str = "fits") -> list:
     spec = result["spec"]
     rows = []
     for f in sorted(result.get(key) or [], key=lambda f: f.score):
-        effects = _params(f, spec)
+        effects = effect_params(f, spec)
         row = dict(name=" + ".join(e["name"] for e in effects),
                    target=" + ".join(e["target"] for e in effects),
                    effects=effects,
@@ -110,7 +110,7 @@ def selected_rows(result) -> list:
     if chosen is None:
         return [{"name": "none"}]
     out = []
-    for e in _params(chosen, result["spec"], calibration_shift(result)):
+    for e in effect_params(chosen, result["spec"], calibration_shift(result)):
         e["held_out_error"] = dict(normalised_rms=float(np.sqrt(chosen.test_ssr / chosen.test_n)),
                                    ssr_reduction=float(chosen.reduction))
         e["penalty_score"] = float(chosen.score)
@@ -372,7 +372,7 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
         scenario_effects=[dict(name=c.name, target=c.target, value=[float(v) for v in p])
                           for c, p in result["base"]
                           if all(c not in f.cands for f in result.get("nuisance", []))],
-        nuisance=[dict(_params(f, spec)[0], ssr_reduction=float(f.reduction),
+        nuisance=[dict(effect_params(f, spec)[0], ssr_reduction=float(f.reduction),
                        note=NUISANCE_NOTES.get(f.cands[0].name, NUISANCE_NOTES[""]))
                   for f in result.get("nuisance", [])],
         noise_floor={n: float(s) for n, s in zip(spec.state_names, result["sigma"])},
