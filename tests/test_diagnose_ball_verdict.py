@@ -144,6 +144,17 @@ def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident()
     assert judged["ambiguous"][1]["target"] == "ee_ball"
     assert "mass_scale[ball]" in judged["ambiguous"][1]["note"]
     assert judged["separating_excitation"][-1]["excitation"]["peak_accel"] == [8.0, 12.0]
+    # an offset of every pair (51023: a table 1.25 mm off, named r_comp over both pairs)
+    # whose EE-ball part holds zero is ambiguous with the table offset alone
+    table = _fit("contact_offset", "ball_table", NONE - 10 + RNG.normal(0, 0.5, 30), NONE)
+    rc = Fit((Candidate("r_comp", "all_pairs"),), np.array([1e-4, 1.05e-3]),
+             np.array([[-4e-4, 6e-4], [8e-4, 1.3e-3]]), np.array([2.5e-4, 1.2e-4]), 0.0)
+    for k in ("test_cluster_ssr", "test_ssr", "test_n", "score", "reduction", "z_vs_none"):
+        setattr(rc, k, getattr(best, k))
+    judged = verdict([table, rc], rc, NONE_EVAL, 0.1)
+    require_support(judged, spec, rc, [table, rc], NONE_EVAL)
+    assert [(a["name"], a["target"]) for a in judged["ambiguous"]] == [
+        ("r_comp", "all_pairs"), ("contact_offset", "ball_table")]
 
 
 def test_a_none_that_cannot_rule_out_a_size_that_matters_is_ambiguous():

@@ -420,16 +420,23 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     return fit
 
 
-def supported_components(spec, fit, shift=None) -> list[bool]:
-    """Per effect of the fit: whether its physical 95 % interval (report.effect_params:
-    through the model's measured model form, a contact offset read as the total offset
-    from the user's model) excludes the model's own value for at least one parameter."""
+def supported_components(spec, fit, shift=None) -> list[tuple]:
+    """[(candidate, supported)] per effect of the fit, an offset of every pair (r_comp)
+    read as one contact_offset per pair: supported when its physical 95 % interval
+    (report.effect_params: through the model's measured model form, an offset read as
+    the total offset from the user's model) excludes the model's own value for at least
+    one parameter."""
+    from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     from adaptive_c3.tools.diagnosis.engine.report import effect_params
     out = []
     for c, row in zip(fit.cands, effect_params(fit, spec, shift)):
-        nominal = c.nominal(spec)
-        out.append(any(not (p["ci95"][0] <= float(n) <= p["ci95"][1])
-                       for p, n in zip(row["params"], nominal)))
+        clear = [not (p["ci95"][0] <= float(n) <= p["ci95"][1])
+                 for p, n in zip(row["params"], c.nominal(spec))]
+        if c.name == "r_comp":
+            out += [(Candidate("contact_offset", pair), k)
+                    for pair, k in zip(spec.pair_names, clear)]
+        else:
+            out.append((c, any(clear)))
     return out
 
 
@@ -437,19 +444,17 @@ def require_support(judged, spec, chosen, fits, none_eval, shift=None) -> None:
     """A chosen effect is named only while its own (widened) 95 % interval excludes the
     model's value: one whose interval holds it is as consistent with the data as the
     model without it. A single such effect makes the verdict ambiguous with `none`; a
-    pair with one such member, ambiguous with the single fit of the other member (with
-    `none` when both are)."""
+    pair (or an offset of every pair) with such a member, ambiguous with the single fit
+    of the other member (with `none` when no member is supported)."""
     if chosen is None:
         return
-    ok = supported_components(spec, chosen, shift)
-    if all(ok):
+    parts = supported_components(spec, chosen, shift)
+    if all(k for _, k in parts):
         return
-    held = [c.label() for c, k in zip(chosen.cands, ok) if not k]
-    note = f"{', '.join(held)}: its 95 % interval holds the model's value"
-    first = fit_row(chosen, none_eval)
-    kept = [c for c, k in zip(chosen.cands, ok) if k]
-    single = next((f for f in fits if len(kept) == 1 and list(f.cands) == kept), None)
+    held = [c for c, k in parts if not k]
+    kept = tuple(c for c, k in parts if k)
+    note = f"{', '.join(c.label() for c in held)}: its 95 % interval holds the model's value"
+    single = next((f for f in fits if len(kept) == 1 and tuple(f.cands) == kept), None)
     other = fit_row(single, none_eval) if single is not None else fit_row(None, none_eval)
-    how = MORE_EVIDENCE.get(chosen.cands[ok.index(False)].name, DEFAULT_SEPARATION) \
-        if single is not None else None
-    _join(judged, first, dict(other, note=note), how)
+    how = MORE_EVIDENCE.get(held[0].name, DEFAULT_SEPARATION) if single is not None else None
+    _join(judged, fit_row(chosen, none_eval), dict(other, note=note), how)
