@@ -114,6 +114,9 @@ def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident()
     assert judged["verdict"] == "ambiguous"
     assert [a["name"] for a in judged["ambiguous"]] == ["viscous_damping", "none"]
     assert "holds the model's value" in judged["ambiguous"][1]["note"]
+    from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
+    assert "none (held-out" in ambiguity_summary(judged)
+    assert "viscous_damping[ball]: its 95 % interval holds" in ambiguity_summary(judged)
     assert judged["separating_excitation"][0]["between"] == ["viscous_damping", "none"]
     assert judged["separating_excitation"][0]["excitation"]["release_speed"] == [0.15, 0.25]
     # the same effect with an interval clear of zero stays named

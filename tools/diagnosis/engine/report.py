@@ -143,7 +143,7 @@ def ambiguity_summary(report) -> str:
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "
-                      f"(held-out {_fmt(a['held_out_score'])}{_not_excluded(a)})"
+                      f"(held-out {_fmt(a['held_out_score'])}{_member_note(a)})"
                       for a in report["ambiguous"])
     fix = "; ".join(f"{' vs '.join(p['between'])}: {p['change']}"
                     for p in report["separating_excitation"])
@@ -155,10 +155,13 @@ def ambiguity_summary(report) -> str:
                   f"--scenario ...`).")
 
 
-def _not_excluded(member) -> str:
-    """The 95 % interval of a member that joined because `none` cannot rule it out."""
+def _member_note(member) -> str:
+    """The 95 % interval of a member that joined because `none` cannot rule it out, or
+    why a member joined (its note: e.g. the chosen effect's interval holds the model's
+    value, evidence.require_support)."""
     if "ci95" not in member:
-        return ""
+        return f"; {member['note']}" if "holds the model's value" in member.get("note", "") \
+            else ""
     lo, hi = member["ci95"]
     return f"; not excluded: 95% interval {_fmt(lo)} to {_fmt(hi)}"
 
