@@ -78,6 +78,17 @@ def test_a_table_offset_is_recovered_from_a_short_recording(scenario):
     assert fit.train_ssr < 0.25 * np.sum(prob.residuals([], prob.used()) ** 2)
 
 
+def test_the_drake_spec_reads_offsets_without_the_lcs_model_form(scenario):
+    """BallSpec.model_form_bias maps the rigid LCS's reading of Drake's data; the Drake
+    spec (built from the LCS spec's fields) must not inherit it."""
+    from adaptive_c3.tools.diagnosis.engine.report import physical_interval
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    c = Candidate("contact_offset", "ee_ball")
+    assert ball_spec(scenario).model_form_bias[c.label()]
+    spec = drake_ball_spec(scenario, workers=1)
+    assert physical_interval(spec, c, 2e-3, 1e-3, 3e-3, 5e-4) == (2e-3, 1e-3, 3e-3, 5e-4)
+
+
 def test_force_elements_oppose_the_motion_on_the_table_only():
     c = BallForceCoefficients(rolling=0.002, torsional=0.001, drag=0.5, force=(0.03, -0.01))
     w = np.array([[2.0, 0.0, 1.0], [2.0, 0.0, 1.0]])

@@ -280,5 +280,8 @@ def drake_ball_spec(scenario, workers: int = 2) -> DrakeBallSpec:
     # of the cost or 0.1 % of the range / 20
     fields["grids"] = dict(base.grids, contact_offset=np.linspace(-0.004, 0.004, 5))
     fields.update(cache={}, grid_points=5, pair_singles=2, fit_tolerance=(1e-3, 1e-3))
+    # the LCS's measured model form (BallSpec.model_form_bias) is the rigid LCS's reading
+    # of Drake's data: Drake's plant reads its own kind of data directly
+    fields["model_form_bias"] = {}
     return DrakeBallSpec(**fields, world=world, mu_pairs=mu_pairs, forces=forces,
                          workers=workers)
