@@ -1,7 +1,7 @@
 """Per-effect hit rates of `diagnose` on concealed ball-rolling draws (issue 19's marks).
 
     python -m adaptive_c3.tools.diagnosis.harness.ball_hit_rate [DRAWS] [FIRST_SEED] [--out DIR]
-        [--follow-up] [--no-open-pair-gate]
+        [--follow-up] [--no-open-pair-gate] [--model lcs|drake]
     python -m adaptive_c3.tools.diagnosis.harness.ball_hit_rate --merge A.json B.json [--out DIR]
         (one summary and per-effect table over the rows of several runs)
 
@@ -236,6 +236,9 @@ def main(argv=None) -> int:
     ap.add_argument("--no-open-pair-gate", action="store_true",
                     help="diagnose with Anitescu's relaxed cone on open pairs too (the model "
                          "before issue 30: BallSpec.open_pair_tol = None)")
+    ap.add_argument("--model", choices=("lcs", "drake"), default="lcs",
+                    help="the model diagnosed: the controller's LCS (default) or Drake's "
+                         "plant of the scenario's nominal world")
     ap.add_argument("--merge", nargs="+", metavar="JSON",
                     help="summarise the rows of these ball_hit_rate.json files together")
     args = ap.parse_args(argv)
@@ -248,6 +251,7 @@ def main(argv=None) -> int:
         merge(args.merge, Path(args.out))
         return 0
     kw = dict(spec_overrides=dict(open_pair_tol=None)) if args.no_open_pair_gate else {}
+    kw["model"] = args.model
     print(json.dumps(run(args.draws, args.first_seed, Path(args.out),
                          follow_up=args.follow_up, **kw), indent=1))
     return 0

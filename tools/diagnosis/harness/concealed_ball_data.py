@@ -318,6 +318,8 @@ def clean_error_cut(rec, clean, result) -> tuple[float, float]:
                           input_names=rec.input_names, episode=rec.episode)
     W = make_windows(clean_rec, result["horizon"])
     fold, keep = result["foldH"], result["spec"].fit_weight > 0
+    es = int(getattr(result["spec"], "eval_stride", 1))   # costly models: every es-th window
+    W, fold = W.take(np.arange(len(W)) % es == 0), fold[::es]
     out = []
     P_user = result.get("P_user", result["P0"])
     for models in ({k: P_user for k in result["P1_folds"]}, result["P1_folds"]):
@@ -379,12 +381,13 @@ def judged_fields(result, truth) -> dict:
 
 
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: bool = False,
-               spec_overrides: dict | None = None, **kw) -> dict:
+               spec_overrides: dict | None = None, model: str = "lcs", **kw) -> dict:
     """Draw, diagnose (and run the SINDy baseline), score against the concealed truth.
     follow_up: when the verdict is ambiguous, record again with the gait change the
     report proposes (as its user would), diagnose both recordings together and score
     that under row["follow_up"] (same keys). spec_overrides: BallSpec fields to set
-    (e.g. open_pair_tol=None, the model before issue 30)."""
+    (e.g. open_pair_tol=None, the model before issue 30). model: the backend diagnosed,
+    lcs (the controller's LCS) or drake (Drake's plant of the scenario's nominal world)."""
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import merge_changes
     from adaptive_c3.tools.recording import concat_recordings
@@ -392,7 +395,7 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: 
     kw.setdefault("params", ModelParams.from_scenario(scenario))
     rec, truth, clean = concealed_draw(seed, **kw)
     row = _score(seed, rec, clean, truth, scenario, baseline, pairs, kw.get("vary", True),
-                 spec_overrides)
+                 spec_overrides, model)
     proposals = row.pop("proposals")
     if follow_up and row["verdict"] == "ambiguous" and proposals:
         change = merge_changes(p.get("excitation", {}) for p in proposals)
@@ -400,24 +403,30 @@ def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: 
         rec2, _, clean2 = concealed_draw(seed, follow_up=change, **kw2)
         both = concat_recordings([rec, rec2])
         row2 = _score(seed, both, np.concatenate([clean, clean2]), truth, scenario, False,
-                      pairs, kw.get("vary", True), spec_overrides)
+                      pairs, kw.get("vary", True), spec_overrides, model)
         row2.pop("proposals")
         row["follow_up"] = dict(row2, excitation=change)
     return row
 
 
-def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary, spec_overrides=None) -> dict:
+def _score(seed, rec, clean, truth, scenario, baseline, pairs, vary, spec_overrides=None,
+           model: str = "lcs") -> dict:
     from adaptive_c3.tools.diagnosis.harness.concealed_data import score_diagnosis
     from adaptive_c3.tools.diagnosis.diagnose import diagnose
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball import drake_ball_spec
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
     var = draw_variation(seed, vary)
-    spec = ball_spec(scenario)
+    spec = drake_ball_spec(scenario) if model == "drake" else ball_spec(scenario)
     for key, value in (spec_overrides or {}).items():
         setattr(spec, key, value)
-    result = diagnose(rec, spec, progress=False, pairs=pairs)
-    eff = Truth(truth.name, truth.target, effective_truth_value(truth, var), truth.unit)
-    row = score_diagnosis(seed, rec, eff, clean, spec, result, baseline,
-                          error_cut=clean_error_cut)
+    try:
+        result = diagnose(rec, spec, progress=False, pairs=pairs)
+        eff = Truth(truth.name, truth.target, effective_truth_value(truth, var), truth.unit)
+        row = score_diagnosis(seed, rec, eff, clean, spec, result, baseline and model == "lcs",
+                              error_cut=clean_error_cut)
+    finally:
+        if hasattr(spec, "close"):       # Drake's rollout worker processes
+            spec.close()
     row.update(variation=var.as_dict(), drawn_value=truth.value, **judged_fields(result, eff))
     apply_size_rule(row, eff, spec)
     row["favoured"] = bool(row["named"] and row["verdict"] != "ambiguous")
