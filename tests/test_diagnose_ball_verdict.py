@@ -113,7 +113,7 @@ def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident()
     require_support(judged, spec, drag, [drag], NONE_EVAL)
     assert judged["verdict"] == "ambiguous"
     assert [a["name"] for a in judged["ambiguous"]] == ["viscous_damping", "none"]
-    assert "holds the model's value" in judged["ambiguous"][1]["note"]
+    assert "holds the model's value" in judged["ambiguous"][1]["reason"]
     from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
     assert "none (held-out" in ambiguity_summary(judged)
     assert "viscous_damping[ball]: its 95 % interval holds" in ambiguity_summary(judged)
@@ -145,7 +145,7 @@ def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident()
     require_support(judged, spec, pair, [ee, pair], NONE_EVAL)
     assert [a["name"] for a in judged["ambiguous"]][1] == "contact_offset"
     assert judged["ambiguous"][1]["target"] == "ee_ball"
-    assert "mass_scale[ball]" in judged["ambiguous"][1]["note"]
+    assert "mass_scale[ball]" in judged["ambiguous"][1]["reason"]
     assert judged["separating_excitation"][-1]["excitation"]["peak_accel"] == [8.0, 12.0]
     # an offset of every pair (51023: a table 1.25 mm off, named r_comp over both pairs)
     # whose EE-ball part holds zero is ambiguous with the table offset alone

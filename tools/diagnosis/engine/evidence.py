@@ -457,4 +457,4 @@ def require_support(judged, spec, chosen, fits, none_eval, shift=None) -> None:
     single = next((f for f in fits if len(kept) == 1 and tuple(f.cands) == kept), None)
     other = fit_row(single, none_eval) if single is not None else fit_row(None, none_eval)
     how = MORE_EVIDENCE.get(held[0].name, DEFAULT_SEPARATION) if single is not None else None
-    _join(judged, fit_row(chosen, none_eval), dict(other, note=note), how)
+    _join(judged, fit_row(chosen, none_eval), dict(other, reason=note), how)

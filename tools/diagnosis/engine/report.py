@@ -157,11 +157,10 @@ def ambiguity_summary(report) -> str:
 
 def _member_note(member) -> str:
     """The 95 % interval of a member that joined because `none` cannot rule it out, or
-    why a member joined (its note: e.g. the chosen effect's interval holds the model's
-    value, evidence.require_support)."""
+    its `reason` (evidence.require_support: the chosen effect's interval holds the
+    model's value)."""
     if "ci95" not in member:
-        return f"; {member['note']}" if "holds the model's value" in member.get("note", "") \
-            else ""
+        return f"; {member['reason']}" if "reason" in member else ""
     lo, hi = member["ci95"]
     return f"; not excluded: 95% interval {_fmt(lo)} to {_fmt(hi)}"
 
