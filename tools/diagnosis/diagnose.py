@@ -254,13 +254,12 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)
-    require_support(judged, spec, chosen, fits, none_eval, shift)
-    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift)
-    if chosen is not None:
         Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
                                               none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
+    require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
+    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
