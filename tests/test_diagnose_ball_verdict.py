@@ -29,6 +29,12 @@ def _fit(name, target, clusters, none_clusters):
     return f
 
 
+def _score_as(f, like):
+    """Give fit f the held-out scores of `like` (a multi-parameter fit built by hand)."""
+    for k in ("test_cluster_ssr", "test_ssr", "test_n", "score", "reduction", "z_vs_none"):
+        setattr(f, k, getattr(like, k))
+
+
 RNG = np.random.default_rng(0)
 NONE = 100 + RNG.normal(0, 1, 30)
 NONE_EVAL = (float(NONE.sum()), 1000, NONE, None)
@@ -138,8 +144,7 @@ def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident()
     pair = Fit((Candidate("contact_offset", "ee_ball"), Candidate("mass_scale", "ball")),
                np.array([3e-3, 1.1]), np.array([[2e-3, 4e-3], [0.7, 1.5]]),
                np.array([5e-4, 0.2]), 0.0)
-    for k in ("test_cluster_ssr", "test_ssr", "test_n", "score", "reduction", "z_vs_none"):
-        setattr(pair, k, getattr(best, k))
+    _score_as(pair, best)
     judged = verdict([ee, pair], pair, NONE_EVAL, 0.1)
     assert judged["verdict"] == "named"
     require_support(judged, spec, pair, [ee, pair], NONE_EVAL)
@@ -152,8 +157,7 @@ def test_a_named_effect_whose_interval_holds_the_models_value_is_not_confident()
     table = _fit("contact_offset", "ball_table", NONE - 10 + RNG.normal(0, 0.5, 30), NONE)
     rc = Fit((Candidate("r_comp", "all_pairs"),), np.array([1e-4, 1.05e-3]),
              np.array([[-4e-4, 6e-4], [8e-4, 1.3e-3]]), np.array([2.5e-4, 1.2e-4]), 0.0)
-    for k in ("test_cluster_ssr", "test_ssr", "test_n", "score", "reduction", "z_vs_none"):
-        setattr(rc, k, getattr(best, k))
+    _score_as(rc, best)
     judged = verdict([table, rc], rc, NONE_EVAL, 0.1)
     require_support(judged, spec, rc, [table, rc], NONE_EVAL)
     assert [(a["name"], a["target"]) for a in judged["ambiguous"]] == [

@@ -66,7 +66,7 @@ TRIM = 0.2               # fraction of episodes cut at each end by the fit objec
 FINE_POINTS = 4          # values added between the coarse grid's best point's neighbours
 REFIT_FACTORS = (0.94, 0.97, 1.0, 1.03)   # a two-parameter effect's refit key, x its value
 DEFAULT_FIT_EPISODES = {"lcs": 30, "drake": 60}   # diagnose's --fit-episodes (a Drake
-                         # rollout costs ~1/30 of an LCS one; 60 cube tosses: 611 CPU-s)
+                         # rollout costs ~1/30 of an LCS one; 60 cube tosses: 348 s on 2 cores)
 PAIRED_FIT = ("drake",)  # backends fitted by the paired objective (see objective): Drake's
                          # default is within ~1 % of size of its candidates on the real tosses,
                          # a change far below the toss-to-toss spread the unpaired one carries
