@@ -32,7 +32,7 @@ from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NA
                                                               ee_input_from_motion)
 from adaptive_c3.diagrams.ball_rolling_camera import add_ball_camera
 from adaptive_c3.diagrams.ball_rolling_world import (ball_start_xy, make_gait, start_states,
-                                                     true_radius, true_world)
+                                                     true_mass, true_radius, true_world)
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
 from adaptive_c3.systems.contact.anitescu_lcs import OPEN_PAIR_TOL
 from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
@@ -358,4 +358,4 @@ def _set_panda_start(plant, panda, ee_start, s):
 
 __all__ = ["BallRollingDiagram", "BallRollingController", "add_ball_rolling_controller",
            "build_ball_rolling_diagram", "c3_options",
-           "learner_options", "make_gait", "make_impedance_controller", "true_radius", "ball_start_xy"]
+           "learner_options", "make_gait", "make_impedance_controller", "true_mass", "true_radius", "ball_start_xy"]

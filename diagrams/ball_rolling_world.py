@@ -18,6 +18,11 @@ def true_radius(s: BallRollingScenario) -> float:
     return s.model.ball_radius - s.model.radius_error
 
 
+def true_mass(s: BallRollingScenario) -> float:
+    """The simulated ball's mass, kg (the model's times model.true_mass_scale)."""
+    return s.model.ball_mass * s.model.true_mass_scale
+
+
 def ball_start_xy(s: BallRollingScenario) -> np.ndarray:
     """Start on the circle at ball_start_angle_deg (from +x about the centre, CCW)."""
     a = math.radians(s.ball_start_angle_deg)
@@ -45,7 +50,7 @@ def start_states(s: BallRollingScenario):
 
 def true_world(s: BallRollingScenario):
     """A function plant -> (BallRollingScene, point-EE instance or None) that adds the
-    true world's bodies and geometry to a plant: the TRUE ball radius and friction, a
+    true world's bodies and geometry to a plant: the TRUE ball radius, mass and friction, a
     lumpy fruit drawn from the seed for a fruit object, the Panda or a point EE. The
     same scenario gives the same world every time (the camera's twin relies on it)."""
     m = s.model
@@ -57,7 +62,7 @@ def true_world(s: BallRollingScenario):
     _, ee_start = start_states(s)
 
     def add(plant):
-        scene = add_ball_rolling_scene(plant, ball_radius=true_radius(s), ball_mass=m.ball_mass,
+        scene = add_ball_rolling_scene(plant, ball_radius=true_radius(s), ball_mass=true_mass(s),
                                        ball_position=tuple(start_xy), mu=m.true_friction,
                                        with_arm=(s.robot == "panda"), fruit=fruit)
         ee = None

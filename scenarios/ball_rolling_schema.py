@@ -16,7 +16,9 @@ class RollingModel:
     object: str = "ball"             # ball | orange | lime (the true object)
     ball_radius: float = 0.0315      # the controller's model radius, m
     radius_error: float = 0.005      # model radius - true radius, m (paper: 5 mm)
-    ball_mass: float = 0.132         # kg
+    ball_mass: float = 0.132         # kg, the controller model's ball
+    true_mass_scale: float = 1.0     # the simulated truth's ball mass / ball_mass (the
+                                     # ball's inertia scales with it)
     ee_radius: float = 0.0195        # end-effector tip sphere, m
     ee_mass: float = 1.0             # kg, the controller model's EE (about the arm's
                                      # apparent mass at the tip; the reference uses 0.01)
@@ -198,8 +200,8 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
     m = s.model
     need(m.object in ("ball", "orange", "lime"), f"model.object must be ball, orange or lime, got '{m.object}'")
     need(s.robot in ("panda", "point_ee"), f"robot must be panda or point_ee, got '{s.robot}'")
-    for key in ("ball_radius", "ball_mass", "ee_radius", "ee_mass", "friction", "true_friction",
-                "eps_c", "planning_dt"):
+    for key in ("ball_radius", "ball_mass", "true_mass_scale", "ee_radius", "ee_mass",
+                "friction", "true_friction", "eps_c", "planning_dt"):
         positive(f"model.{key}", getattr(m, key))
     need(math.isfinite(m.radius_error) and abs(m.radius_error) < 0.5 * m.ball_radius,
          f"model.radius_error must be smaller than half the radius, got {m.radius_error}")

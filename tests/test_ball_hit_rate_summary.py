@@ -48,8 +48,9 @@ def test_an_effect_too_small_to_matter_is_right_as_none():
     spec = ball_spec(load_scenario(SCENARIO_DIR / "ball_rolling.yaml")[0])
     none = [("none", "")]
     cases = [  # (truth, value, target, selected, verdict, ambiguous) -> answer
-        (("mass_scale", 1.1, "ball", none, "none"), "confident_right"),
-        (("mass_scale", 1.3, "ball", none, "none"), "confident_wrong"),
+        (("mass_scale", 1.9, "ball", none, "none"), "confident_right"),
+        (("mass_scale", 2.2, "ball", none, "none"), "confident_wrong"),
+        (("mass_scale", 0.45, "ball", none, "none"), "confident_wrong"),
         (("mass_scale", 0.75, "ball", [("mass_scale", "ball")], "named"), "confident_right"),
         (("external_force", -0.007, "ball_x", none, "ambiguous",
           ["none", "mass_scale[ball]"]), "ambiguous_with_truth"),
@@ -73,8 +74,8 @@ def test_an_effect_too_small_to_matter_is_right_as_none():
     s = summarise(rows)
     assert sum(s[a] for a in ANSWERS) == s["draws"] == len(cases)
     assert (s["confident_right"], s["confident_wrong"], s["ambiguous_with_truth"],
-            s["ambiguous_without_truth"]) == (4, 4, 1, 1)
-    assert s["below_size_draws"] == 5 and s["below_size"]["confident_right"] == 3
+            s["ambiguous_without_truth"]) == (4, 5, 1, 1)
+    assert s["below_size_draws"] == 6 and s["below_size"]["confident_right"] == 4
     # named effect draws (interval, excess cut): the answers that name the true effect
     assert s["named_effect_count"] == 2
     assert s["per_effect"]["mass_scale[ball]"]["confident_right"] == 2

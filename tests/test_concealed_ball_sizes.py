@@ -7,7 +7,7 @@ import pytest
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import (
     DRAWABLE, RADIUS_ERROR, Truth, concealed_draw, draw_effect, draw_variation,
-    effective_truth_value, matters, wide_sizes)
+    effective_truth_value, matters, size_regime, wide_sizes)
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams, ball_spec
 
 
@@ -17,11 +17,14 @@ def spec():
 
 
 def test_wide_sizes_straddle_every_size_that_matters(spec):
-    """Every drawable effect has draws on both sides of its size that matters."""
+    """Every drawable effect has draws on both sides of its size that matters (mass on
+    both sides of both of its sizes: below 0.5x and above 2x)."""
     rng = np.random.default_rng(0)
     for name, target in DRAWABLE[1:]:
         below = [matters(draw_effect(rng, name, target, "wide"), spec) for _ in range(300)]
         assert 0.03 < 1 - np.mean(below) < 0.6, (name, target, np.mean(below))
+        if name == "mass_scale":    # drawn against the +-20 % size: 0.5-0.75x, 1.4-2x
+            continue
         narrow = [matters(draw_effect(rng, name, target, "narrow"), spec) for _ in range(300)]
         # the narrow sizes sat past the sizes that matter, except drag (0.08-0.3 N s/m
         # against 0.1: about 9 % of its draws were below)
@@ -29,11 +32,20 @@ def test_wide_sizes_straddle_every_size_that_matters(spec):
             assert 0.02 < 1 - np.mean(narrow) < 0.2
         else:
             assert all(narrow), (name, target)
+    mass = np.array([draw_effect(rng, "mass_scale", "ball", "wide").value for _ in range(300)])
+    hit = np.array([matters(Truth("mass_scale", "ball", m, "1"), spec) for m in mass])
+    for side in (mass < 1, mass > 1):
+        assert 0.1 < np.mean(hit[side]) < 0.9
+    # the mass draws of the +-20 % size (seeds 12000-69999) all sit below a factor of 2
+    old = [draw_effect(rng, "mass_scale", "ball", "wide_mass_20pc") for _ in range(100)]
+    assert not any(matters(t, spec) for t in old)
 
 
 def test_old_dev_seeds_keep_their_draws_and_new_ones_get_radius_errors():
     assert not wide_sizes(8026) and not wide_sizes(31005) and wide_sizes(12000)
     assert wide_sizes(41000)
+    assert [size_regime(s) for s in (8026, 31005, 12000, 61047, 70000, 71000)] == \
+        ["narrow", "narrow", "wide_mass_20pc", "wide_mass_20pc", "wide", "wide"]
     old, new = draw_variation(8026), draw_variation(12015)
     assert old.ee_dr == old.ball_dr == 0.0
     assert 0 < abs(new.ee_dr) <= RADIUS_ERROR and 0 < abs(new.ball_dr) <= RADIUS_ERROR

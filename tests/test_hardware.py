@@ -294,14 +294,16 @@ def test_bridge_survives_nonfinite_and_malformed_messages():
     assert counts == {"ball_messages": 0, "ball_messages_ignored": 1}
 
 
-def test_sim_driver_world_has_the_true_friction():
+def test_sim_driver_world_has_the_true_friction_and_mass():
     """The simulated driver's plant is the true world: the ball's contact has
-    model.true_friction, not the controller model's model.friction."""
+    model.true_friction, not the controller model's model.friction, and its mass is
+    model.ball_mass x model.true_mass_scale."""
     from pydrake.lcm import DrakeLcm
 
     from adaptive_c3.tools.hardware.sim_driver import build_sim_driver
     s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"),
-                         FAST + ["model.true_friction=0.4", "model.friction=1.0"])
+                         FAST + ["model.true_friction=0.4", "model.friction=1.0",
+                                 "model.true_mass_scale=2.5"])
     drv = build_sim_driver(s, DrakeLcm("memq://"))
     ctx = drv.diagram.CreateDefaultContext()
     plant = drv.plant
@@ -310,3 +312,4 @@ def test_sim_driver_world_has_the_true_friction():
     (gid,) = plant.GetCollisionGeometriesForBody(plant.GetBodyByName("ball"))
     mu = insp.GetProximityProperties(gid).GetProperty("material", "coulomb_friction")
     assert mu.static_friction() == 0.4
+    assert plant.GetBodyByName("ball").default_mass() == pytest.approx(2.5 * s.model.ball_mass)

@@ -93,7 +93,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     from pydrake.systems.lcm import LcmInterfaceSystem, LcmPublisherSystem
 
     from adaptive_c3.diagrams.ball_rolling import (_set_panda_start, ball_start_xy,
-                                                   make_gait, true_radius)
+                                                   make_gait, true_mass, true_radius)
     from adaptive_c3.models.ball_rolling_controller_model import default_state
     from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene
     from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
@@ -118,7 +118,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
         time_step=s.sim_time_step, discrete_contact_approximation="sap"), builder)
     start_xy = ball_start_xy(s)
-    scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=m.ball_mass,
+    scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=true_mass(s),
                                    ball_position=tuple(start_xy), mu=m.true_friction,
                                    with_arm=True)
     plant.Finalize()

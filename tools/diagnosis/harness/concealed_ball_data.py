@@ -26,10 +26,13 @@ force: linear interpolation between samples), a table height off by +-0.3 mm and
 the wide-size seeds, below) EE and ball radii off by +-0.3 mm each; the effective truth
 of a contact_offset draw includes them (effective_truth_value).
 
-Sizes (SIZES): the seeds from 12000 on draw sizes that straddle every size that matters
-(BallSpec.relevant_size: a draw below it is scored right when the answer is `none`,
-apply_size_rule); the earlier development seeds (and the retired evaluation seeds
-31000-31020) keep the narrow sizes and the variation their tests and figures were made with.
+Sizes (SIZES, size_regime): the seeds from 12000 on draw sizes that straddle every size
+that matters (BallSpec.relevant_size: a draw below it is scored right when the answer is
+`none`, apply_size_rule); from 70000 on the mass draws straddle its size that matters,
+a factor of 2 (0.3-0.7x and 1.4-3x; the seeds 12000-69999 drew 0.6-0.9x and 1.1-1.8x
+when that size was +-20 %); the earlier development seeds (and the retired evaluation
+seeds 31000-31020) keep the narrow sizes and the variation their tests and figures were
+made with.
 
 Excitation (the push gait: tools/diagnosis/tasks/ball_rolling/ball_excitation.py; `follow_up=` records
 again under a gait change the report proposed): a 100 Hz controller (zero-order-held
@@ -83,17 +86,21 @@ UNITS = {"contact_offset": "m", "friction_coefficient": "1", "rolling_resistance
 
 # Drawn sizes (mass: two uniform ranges, one below and one above 1; offsets and forces
 # take a random sign). "narrow": the sizes before issue 30, all far past the sizes that
-# matter; "wide": they straddle them (offsets 1 mm, mass +-20 %, forces 0.01 N, drag
-# 0.1 N*s/m, rolling resistance 0.5 mm, EE-ball mu 0.5).
+# matter; "wide": they straddle them (offsets 1 mm, forces 0.01 N, drag 0.1 N*s/m,
+# rolling resistance 0.5 mm, EE-ball mu 0.5, mass a factor of 2); "wide_mass_20pc": the
+# same with the mass draws of the +-20 % size (seeds 12000-69999).
+_WIDE = dict(contact_offset=(0.0003, 0.0035), friction_coefficient=(0.1, 0.7),
+             rolling_resistance=(0.0002, 0.004), mass_scale=(0.3, 0.7, 1.4, 3.0),
+             external_force=(0.005, 0.06), viscous_damping=(0.03, 0.3))
 SIZES = {
     "narrow": dict(contact_offset=(0.002, 0.0035), friction_coefficient=(0.1, 0.3),
                    rolling_resistance=(0.001, 0.004), mass_scale=(0.5, 0.75, 1.4, 2.0),
                    external_force=(0.02, 0.06), viscous_damping=(0.08, 0.3)),
-    "wide": dict(contact_offset=(0.0003, 0.0035), friction_coefficient=(0.1, 0.7),
-                 rolling_resistance=(0.0002, 0.004), mass_scale=(0.6, 0.9, 1.1, 1.8),
-                 external_force=(0.005, 0.06), viscous_damping=(0.03, 0.3)),
+    "wide_mass_20pc": dict(_WIDE, mass_scale=(0.6, 0.9, 1.1, 1.8)),
+    "wide": _WIDE,
 }
 WIDE_FROM_SEED = 12000
+MASS_2X_FROM_SEED = 70000
 RETIRED_NARROW = range(31000, 31021)    # the first evaluation set, quoted with narrow sizes
 RADIUS_ERROR = 3e-4                     # m, +- on the EE and the ball radius (wide seeds)
 
@@ -101,6 +108,13 @@ RADIUS_ERROR = 3e-4                     # m, +- on the EE and the ball radius (w
 def wide_sizes(seed: int) -> bool:
     """Whether a seed draws the wide sizes and the radius errors (module doc)."""
     return seed >= WIDE_FROM_SEED and seed not in RETIRED_NARROW
+
+
+def size_regime(seed: int) -> str:
+    """The SIZES a seed draws from (module doc)."""
+    if not wide_sizes(seed):
+        return "narrow"
+    return "wide" if seed >= MASS_2X_FROM_SEED else "wide_mass_20pc"
 
 
 def draw_effect(rng, name=None, target=None, sizes: str = "wide") -> Truth:
@@ -297,7 +311,7 @@ def concealed_draw(seed: int, name=None, target=None, vary: bool = True,
     follow_up: a gait change (ball_excitation.Excitation fields, as the report proposes):
     a second recording of the same truth and variation under that gait, new noise."""
     rng = np.random.default_rng([seed, 11])
-    truth = draw_effect(rng, name, target, "wide" if wide_sizes(seed) else "narrow")
+    truth = draw_effect(rng, name, target, size_regime(seed))
     variation = kw.pop("variation", None) or draw_variation(seed, vary)
     rec_seed = int(rng.integers(2**31))
     if follow_up is not None:
