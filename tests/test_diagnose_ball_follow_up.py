@@ -59,6 +59,33 @@ def test_a_push_effect_against_none_asks_for_pushes_that_end_at_rest():
     assert against_none("viscous_damping")[1]["release_speed"][1] > 0
 
 
+def test_a_set_asking_for_release_and_rest_gets_both_kinds_of_push():
+    """Dev draw 70002 (mass 2.0x) ended {mass, ball-table offset, none, drag}: the merged
+    follow-up released every push (drag's ask) at mass's 8-12 m/s^2, where the LCS reads
+    a spurious mass. A set asking for both now gets half release pushes, half that end
+    at rest; one asking for releases only keeps releasing every push."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import against_none
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Pusher
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
+    mixed = merge_changes([against_none("mass_scale")[1], against_none("viscous_damping")[1]])
+    assert mixed["release_fraction"] == 0.5 and mixed["release_speed"][1] > 0
+    only = merge_changes([against_none("viscous_damping")[1], against_none("rolling_resistance")[1]])
+    assert "release_fraction" not in only
+
+    def released(change, n=200):
+        rng, p = np.random.default_rng(0), ModelParams()
+        ex = Excitation().changed(**change)
+        out = []
+        for k in range(n):
+            pusher = Pusher(rng, p, [0.0, 0.0], excitation=ex, episode=k)
+            pusher._plan(np.array([0.0, 0.0, 0.1]), np.array([0.05, 0.0, p.ball_radius]),
+                         np.zeros(3))
+            out.append(pusher.segs[-1][3] is not None)     # ends moving: a release
+        return np.mean(out)
+    assert 0.4 < released(mixed) < 0.6
+    assert released(only) == 1.0 and released({}) == 0.0
+
+
 def test_release_pushes_let_the_ball_coast_clear_of_the_ee():
     from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
     ex = dict(release_speed=[0.1, 0.2], duration_s=2.4, directions="axes", episodes=4)

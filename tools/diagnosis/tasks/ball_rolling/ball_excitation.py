@@ -6,8 +6,9 @@ rolls it along a smooth path, lifts and hovers while the ball rolls on. `Excitat
 holds what a user would change: the press depth, the push length and peak
 acceleration, the ball's speed when the EE lets go (0: the push ends at rest, so the
 ball stops under the EE; > 0: the EE lifts off while still moving and the ball coasts
-freely), push directions (random, or cycling +x, +y, -x, -y), the touch-down time, the
-number and length of episodes. Positions in the world frame, m; speeds m/s; times s.
+freely; release_fraction: of the pushes, the others end at rest), push directions
+(random, or cycling +x, +y, -x, -y), the touch-down time, the number and length of
+episodes. Positions in the world frame, m; speeds m/s; times s.
 
 `Excitation.changed(**fields)` is what a proposal in the report holds
 (`separating_excitation[i].excitation`), e.g. {"release_speed": [0.1, 0.2],
@@ -29,6 +30,8 @@ class Excitation:
     push_length: tuple = (0.03, 0.08)      # m, EE travel while rolling the ball
     peak_accel: tuple = (2.0, 10.0)        # m/s^2, of a push that ends at rest
     release_speed: tuple = (0.0, 0.0)      # m/s, the ball's speed when the EE lets go
+    release_fraction: float = 1.0          # of the pushes, when release_speed > 0 (the
+                                           # others end at rest)
     directions: str = "random"             # random | axes (+x, +y, -x, -y in turn)
     touchdown_s: float = 0.15              # s, the last 6 mm of the descent onto the top
 
@@ -48,8 +51,17 @@ def merge_changes(changes) -> dict:
     """One excitation change from several proposals, each asking for more of something:
     the most and the longest episodes, the faster release, the slower touch-down, axis
     directions if any asks for them; press and acceleration from the first that sets
-    them."""
+    them. When one asks for release pushes and another for pushes without a release
+    (it sets the press or the acceleration, not the release), half the pushes release
+    and half end at rest: release pushes are where the LCS reads a spurious mass or
+    EE-ball friction, so a push-phase effect needs pushes that end at rest."""
+    changes = list(changes)
     out: dict = {}
+    releases = any(ch.get("release_speed", (0.0, 0.0))[1] > 0 for ch in changes)
+    at_rest = any(("press" in ch or "peak_accel" in ch) and "release_speed" not in ch
+                  for ch in changes)
+    if releases and at_rest:
+        out["release_fraction"] = 0.5
     for ch in changes:
         for k, v in ch.items():
             if k not in out:
@@ -118,7 +130,10 @@ class Pusher:
         start = ball + np.array([0, 0, R + r - press]) - 0.004 * d
         near = start + np.array([0, 0, 0.006])
         L, a = rng.uniform(*ex.push_length), rng.uniform(*ex.peak_accel)
-        release = rng.uniform(*ex.release_speed) if ex.release_speed[1] > 0 else 0.0
+        release = 0.0
+        if ex.release_speed[1] > 0 and (ex.release_fraction >= 1.0
+                                        or rng.random() < ex.release_fraction):
+            release = rng.uniform(*ex.release_speed)
         end = start + L * d
         over = near.copy()
         over[2] = high
