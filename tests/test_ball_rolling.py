@@ -186,6 +186,14 @@ def test_shipped_sweeps_plan_their_cells():
     assert len({t["cell_id"] for t in fruit}) == 6
     errors = plan_trials(load_sweep(SCENARIO_DIR / "error_sweep.yaml"))
     assert len(errors) == 14
+    mass = plan_trials(load_sweep(SCENARIO_DIR / "mass_sweep.yaml"))
+    assert len(mass) == 9 * 2
+    from adaptive_c3.scenarios.schema import load_scenario
+    plan = load_sweep(SCENARIO_DIR / "mass_sweep.yaml")
+    for t in mass[:2]:       # a cell is a valid scenario with the truth's mass set
+        s, _ = load_scenario(plan["scenario"], t["overrides"])
+        assert s.model.true_mass_scale == t["cell"]["model.true_mass_scale"]
+        assert s.model.radius_error == 0.0 and not s.camera.enabled
 
 
 def test_bench_loop_times_components_and_restores_them():
