@@ -186,10 +186,10 @@ def test_shipped_sweeps_plan_their_cells():
     assert len({t["cell_id"] for t in fruit}) == 6
     errors = plan_trials(load_sweep(SCENARIO_DIR / "error_sweep.yaml"))
     assert len(errors) == 14
-    mass = plan_trials(load_sweep(SCENARIO_DIR / "mass_sweep.yaml"))
-    assert len(mass) == 9 * 2
     from adaptive_c3.scenarios.schema import load_scenario
     plan = load_sweep(SCENARIO_DIR / "mass_sweep.yaml")
+    mass = plan_trials(plan)
+    assert len(mass) == 9 * 2
     for t in mass[:2]:       # a cell is a valid scenario with the truth's mass set
         s, _ = load_scenario(plan["scenario"], t["overrides"])
         assert s.model.true_mass_scale == t["cell"]["model.true_mass_scale"]
