@@ -26,6 +26,15 @@ def test_excitation_changes_are_checked_and_merged():
     assert ex.as_dict()["release_speed"] == [0.1, 0.2]
     with pytest.raises(ValueError, match="unknown excitation fields"):
         Excitation().changed(push_speed=1.0)
+    for bad, match in [(dict(release_fraction=1.5), "release_fraction must be in"),
+                       (dict(press=[0.004, 0.003]), "press must be a range"),
+                       (dict(peak_accel=[0.0, 5.0]), "peak_accel must be a range"),
+                       (dict(release_speed=[-0.1, 0.1]), "release_speed must be a range"),
+                       (dict(episodes=0), "episodes must be a whole number"),
+                       (dict(duration_s=float("nan")), "duration_s must be > 0"),
+                       (dict(directions="spiral"), "directions must be random or axes")]:
+        with pytest.raises(ValueError, match=match):
+            Excitation().changed(**bad)
     m = merge_changes([dict(episodes=15, press=[0.003, 0.004], release_speed=[0.0, 0.15]),
                        dict(episodes=25, press=[0.005, 0.008], duration_s=2.4,
                             release_speed=[0.1, 0.2], directions="axes")])

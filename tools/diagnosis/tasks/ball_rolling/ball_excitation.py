@@ -35,6 +35,27 @@ class Excitation:
     directions: str = "random"             # random | axes (+x, +y, -x, -y in turn)
     touchdown_s: float = 0.15              # s, the last 6 mm of the descent onto the top
 
+    def __post_init__(self):
+        """A one-line ValueError for a gait no push can follow."""
+        if int(self.episodes) != self.episodes or self.episodes < 1:
+            raise ValueError(f"excitation episodes must be a whole number >= 1, got {self.episodes}")
+        for name in ("duration_s", "touchdown_s"):
+            if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
+                raise ValueError(f"excitation {name} must be > 0, got {getattr(self, name)}")
+        for name in ("press", "push_length", "peak_accel", "release_speed"):
+            r = getattr(self, name)
+            if (len(r) != 2 or not np.all(np.isfinite(r)) or r[0] < 0 or r[1] < r[0]
+                    or (name != "release_speed" and r[0] <= 0)):
+                raise ValueError(f"excitation {name} must be a range [low, high] with "
+                                 f"0 {'<=' if name == 'release_speed' else '<'} low <= high, "
+                                 f"got {list(r)}")
+        if not 0.0 <= self.release_fraction <= 1.0:
+            raise ValueError(f"excitation release_fraction must be in [0, 1], "
+                             f"got {self.release_fraction}")
+        if self.directions not in ("random", "axes"):
+            raise ValueError(f"excitation directions must be random or axes, "
+                             f"got {self.directions!r}")
+
     def changed(self, **kw) -> "Excitation":
         known = {f.name for f in fields(self)}
         bad = sorted(set(kw) - known)
