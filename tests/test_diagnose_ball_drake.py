@@ -78,6 +78,34 @@ def test_a_table_offset_is_recovered_from_a_short_recording(scenario):
     assert fit.train_ssr < 0.25 * np.sum(prob.residuals([], prob.used()) ** 2)
 
 
+def test_contact_compliance_is_a_bounded_nuisance_never_a_finding(scenario, tmp_path):
+    """Another engine's contact is stiffer or softer than the model's: the Drake spec fits
+    it first as stiffness_calibration / dissipation_calibration within 5x of the
+    scenario's and never offers it as a candidate effect. A clean recording from a 3x
+    stiffer world is fitted stiffer, inside the tolerance, and a kept value patches
+    drake.point_stiffness."""
+    from adaptive_c3.tools.diagnosis.backends.effects import applicable_candidates
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import Variation
+    spec = drake_ball_spec(scenario, workers=1)
+    assert ("stiffness_calibration", "contacts") in spec.nuisance
+    assert ("dissipation_calibration", "contacts") in spec.nuisance
+    names = {c.name for c in applicable_candidates(spec)[0]}
+    assert not names & {"contact_stiffness", "contact_dissipation",
+                        "stiffness_calibration", "dissipation_calibration"}
+    k0 = spec.world.stiffness
+    c = Candidate("stiffness_calibration", "contacts")
+    lo, hi = c.bounds(spec)
+    assert lo[0] == pytest.approx(k0 / 5) and hi[0] == pytest.approx(k0 * 5)
+    rec, _, _ = concealed_draw(8003, name="none", target="", vary=False, episodes=2,
+                               duration_s=1.0, params=ModelParams.from_scenario(scenario),
+                               variation=Variation(stiffness=3 * k0))
+    fit = fit_candidates(_problem(rec, spec, 40), [c], ci=False)
+    assert 1.5 * k0 < fit.values[0] < 5 * k0, (fit.values, k0)
+    data = yaml.safe_load(BALL.read_text())
+    spec.patch_scenario(data, [(c, fit.values)])
+    assert data["drake"]["point_stiffness"] == pytest.approx(fit.values[0])
+
+
 def test_the_drake_spec_reads_offsets_without_the_lcs_model_form(scenario):
     """BallSpec.model_form_bias maps the rigid LCS's reading of Drake's data; the Drake
     spec (built from the LCS spec's fields) must not inherit it."""

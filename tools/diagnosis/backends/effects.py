@@ -103,6 +103,8 @@ _ef_grid, _ef_bounds = _scaled(0.0, 5.0, 0.0, 0.5, symmetric=True)
 _zero = lambda spec, target: 0.0          # noqa: E731
 CALIBRATION_TOLERANCE = 1e-3              # m: how well a table height or tool radius is known
 _one = lambda spec, target: 1.0           # noqa: E731
+COMPLIANCE_TOLERANCE = 5.0                # x: how well a compliant model's contact
+                                          # stiffness and relaxation time are known
 
 
 def _k0(spec, target):
@@ -159,6 +161,16 @@ EFFECTS = {e.name: e for e in [
               nuisance_only=True,
               description="a contact surface off by no more than a calibration tolerance "
                           "(a table height, a tool radius): part of the base model"),
+    EffectDef("stiffness_calibration", "group", ("stiffness",), lambda s, t: "N/m", _k0,
+              lambda s, t: (_k0(s, t) / COMPLIANCE_TOLERANCE, _k0(s, t) * COMPLIANCE_TOLERANCE),
+              lambda s, t: _k0(s, t) * np.geomspace(0.25, 4.0, 9), nuisance_only=True,
+              description="the contact stiffer or softer than the model by no more than a "
+                          "modelling tolerance: part of the base model"),
+    EffectDef("dissipation_calibration", "group", ("relaxation_time",), lambda s, t: "s", _tau0,
+              lambda s, t: (_tau0(s, t) / COMPLIANCE_TOLERANCE, _tau0(s, t) * COMPLIANCE_TOLERANCE),
+              lambda s, t: _tau0(s, t) * np.geomspace(0.25, 4.0, 9), nuisance_only=True,
+              description="the contact's relaxation time off by no more than a modelling "
+                          "tolerance: part of the base model"),
     EffectDef("r_comp", "pairs_all", ("residual",), lambda s, t: "m", _zero,
               lambda s, t: (-0.3, 0.3), lambda s, t: np.linspace(-0.2, 0.2, 41), physical=False,
               description="the paper's additive complementarity residual (catch-all for contact)"),
