@@ -78,7 +78,7 @@ def test_a_table_offset_is_recovered_from_a_short_recording(scenario):
     assert fit.train_ssr < 0.25 * np.sum(prob.residuals([], prob.used()) ** 2)
 
 
-def test_contact_compliance_is_a_bounded_nuisance_never_a_finding(scenario, tmp_path):
+def test_contact_compliance_is_a_bounded_nuisance_never_a_finding(scenario):
     """Another engine's contact is stiffer or softer than the model's: the Drake spec fits
     it first as stiffness_calibration / dissipation_calibration within 5x of the
     scenario's and never offers it as a candidate effect. A clean recording from a 3x

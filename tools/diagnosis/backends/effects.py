@@ -115,6 +115,18 @@ def _tau0(spec, target):
     return spec.relaxation_groups[target][1]
 
 
+def _within_tolerance(nominal):
+    """(bounds, grid) of a compliance nuisance: nominal / COMPLIANCE_TOLERANCE to nominal x
+    COMPLIANCE_TOLERANCE, a geometric grid of 9 inside."""
+    def bounds(spec, target):
+        x0 = nominal(spec, target)
+        return x0 / COMPLIANCE_TOLERANCE, x0 * COMPLIANCE_TOLERANCE
+
+    def grid(spec, target):
+        return nominal(spec, target) * np.geomspace(0.25, 4.0, 9)
+    return bounds, grid
+
+
 EFFECTS = {e.name: e for e in [
     EffectDef("contact_offset", "pair", ("offset",), lambda s, t: "m", _zero,
               lambda s, t: (-0.3, 0.3), lambda s, t: np.linspace(-0.2, 0.2, 41),
@@ -162,13 +174,11 @@ EFFECTS = {e.name: e for e in [
               description="a contact surface off by no more than a calibration tolerance "
                           "(a table height, a tool radius): part of the base model"),
     EffectDef("stiffness_calibration", "group", ("stiffness",), lambda s, t: "N/m", _k0,
-              lambda s, t: (_k0(s, t) / COMPLIANCE_TOLERANCE, _k0(s, t) * COMPLIANCE_TOLERANCE),
-              lambda s, t: _k0(s, t) * np.geomspace(0.25, 4.0, 9), nuisance_only=True,
+              *_within_tolerance(_k0), nuisance_only=True,
               description="the contact stiffer or softer than the model by no more than a "
                           "modelling tolerance: part of the base model"),
     EffectDef("dissipation_calibration", "group", ("relaxation_time",), lambda s, t: "s", _tau0,
-              lambda s, t: (_tau0(s, t) / COMPLIANCE_TOLERANCE, _tau0(s, t) * COMPLIANCE_TOLERANCE),
-              lambda s, t: _tau0(s, t) * np.geomspace(0.25, 4.0, 9), nuisance_only=True,
+              *_within_tolerance(_tau0), nuisance_only=True,
               description="the contact's relaxation time off by no more than a modelling "
                           "tolerance: part of the base model"),
     EffectDef("r_comp", "pairs_all", ("residual",), lambda s, t: "m", _zero,
