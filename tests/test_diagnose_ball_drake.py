@@ -106,6 +106,22 @@ def test_contact_compliance_is_a_bounded_nuisance_never_a_finding(scenario):
     assert data["drake"]["point_stiffness"] == pytest.approx(fit.values[0])
 
 
+def test_a_coarse_grid_start_is_refined_between_its_points(scenario):
+    """The Drake spec's 5-point grid puts the offsets' points 2 mm apart; LM from the
+    best point did not leave it on the sixth evaluation set. Two halvings of the spacing
+    around it start LM within 0.5 mm of a minimum that lies between points."""
+    from adaptive_c3.tools.diagnosis.engine.fit import _refine_on_grid
+    assert drake_ball_spec(scenario, workers=1).grid_halvings == 2
+    grid = np.linspace(-0.004, 0.004, 5)
+    fun = lambda x: np.array([x[0] - 0.0031, 0.5 * (x[0] - 0.0031)])     # noqa: E731
+    costs = np.array([np.sum(fun([g]) ** 2) for g in grid])
+    assert grid[np.argmin(costs)] == pytest.approx(0.004)
+    lo, hi = np.array([-0.3]), np.array([0.3])
+    x = _refine_on_grid(fun, grid, costs, lo, hi, 2)[0]
+    assert abs(x - 0.0031) <= 0.0005 and np.sum(fun([x]) ** 2) < costs.min()
+    assert _refine_on_grid(fun, grid, costs, lo, hi, 0)[0] == pytest.approx(0.004)
+
+
 def test_the_drake_spec_reads_offsets_without_the_lcs_model_form(scenario):
     """BallSpec.model_form_bias maps the rigid LCS's reading of Drake's data; the Drake
     spec (built from the LCS spec's fields) must not inherit it."""

@@ -123,6 +123,7 @@ class BallSpec(SystemSpec):
     fit_weight: np.ndarray | None = None  # [n] 1 = fitted / scored, 0 = ignored
     plot_idx: tuple = ()
     grid_points: int = 7                  # coarse grid points per 1-parameter candidate
+    grid_halvings: int = 0                # halvings of the grid spacing before LM (fit.py)
     window_stride: int = 3                # fit on every 3rd rollout window
     pair_singles: int = 3                 # pairs of the 3 best single effects
     linear_refits: bool = True            # fold / jackknife refits: one Gauss-Newton step
