@@ -57,6 +57,30 @@ def test_equally_good_candidates_are_ambiguous_with_the_separating_push():
     assert "coast" in v["separating_excitation"][0]["change"]
 
 
+def test_a_rival_that_explains_almost_nothing_does_not_join_a_choice():
+    """Development draw 90028 (EE-ball friction 0.17, after a follow-up): friction cut the
+    held-out SSR by 20 %, all of it in a few slip events, and torsional friction by 0.2 %
+    in every cluster. The paired z of the two could not call the rival worse, so it made
+    the answer ambiguous; a rival must cut at least half the reduction a choice needs."""
+    gains = np.zeros(30)
+    gains[[3, 11, 17, 24]] = 150.0                          # 20 % of the SSR, in 4 clusters
+    fric = _fit("friction_coefficient", "ee_ball", NONE - gains, NONE)
+    tors = _fit("torsional_friction", "ball_table", NONE - 0.2 + RNG.normal(0, 0.05, 30), NONE)
+    assert fric.reduction == pytest.approx(0.2, abs=0.01) and tors.reduction < 0.005
+    assert tors.z_vs_none > Z_AMBIG and fric.z_vs_none > Z_AMBIG
+    from adaptive_c3.tools.diagnosis.engine.evidence import _paired, worse_z
+    family = 9                                  # 90028 compared ten single effects
+    assert _paired(tors.test_cluster_ssr, fric.test_cluster_ssr) < worse_z(family)  # old test
+    v = verdict([fric, tors], fric, NONE_EVAL, 0.1, family)
+    assert v["verdict"] == "named" and v["ambiguous"] == []
+    # a rival with a cut of its own (here 8 %, at least half the 10 % bar) still joins
+    rival = _fit("mass_scale", "ball", NONE - gains * 0.4 + RNG.normal(0, 0.05, 30), NONE)
+    assert rival.reduction >= 0.05 and rival.z_vs_none > Z_AMBIG
+    v = verdict([fric, rival], fric, NONE_EVAL, 0.1, family)
+    assert v["verdict"] == "ambiguous"
+    assert [a["name"] for a in v["ambiguous"]] == ["friction_coefficient", "mass_scale"]
+
+
 def test_near_miss_without_a_choice_is_ambiguous_with_none():
     near = _fit("mass_scale", "ball", NONE - 7 + RNG.normal(0, 1, 30), NONE)  # 7 % < 10 %
     assert near.z_vs_none > Z_AMBIG

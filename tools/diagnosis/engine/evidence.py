@@ -211,21 +211,22 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
     and, per competitor of the best, the excitation that would separate them.
 
     The set holds the chosen fit; every single physical effect that clearly beats the
-    unmodified model across clusters (paired z >= Z_AMBIG) and is not clearly worse than
-    the chosen one (paired z < worse_z(family), family: the single effects compared,
-    by default those in fits); and `none` when the chosen fit's gain is not
-    consistent across clusters (z < Z_AMBIG: a few events carry it). With nothing chosen,
-    singles with z >= Z_AMBIG and at least half the reduction a choice of them needs
-    (own_reduction: {effect: bar} where an effect has its own, else min_reduction) join
-    `none`."""
+    unmodified model across clusters (paired z >= Z_AMBIG), cuts its held-out SSR by at
+    least half the reduction a choice of it needs (own_reduction: {effect: bar} where an
+    effect has its own, else min_reduction) and is not clearly worse than the chosen one
+    (paired z < worse_z(family), family: the single effects compared, by default those
+    in fits); and `none` when the chosen fit's gain is not consistent across clusters
+    (z < Z_AMBIG: a few events carry it). With nothing chosen, the singles that pass the
+    first two tests join `none`. The reduction test keeps out a rival that explains
+    almost nothing: when the chosen gain sits in a few events (slips, contacts) the
+    paired z cannot call even a 0.2 % cut worse than a 20 % one (development draw 90028)."""
     from adaptive_c3.tools.diagnosis.engine.fit import reduction_bar
     physical = [f for f in fits if len(f.cands) == 1 and f.physical]
     z_worse = worse_z(len(physical) - 1 if family is None else family)
-    singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG]
+    singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG
+               and f.reduction >= 0.5 * reduction_bar(own_reduction, f, min_reduction)]
     if chosen is None:
-        near = [f for f in singles
-                if f.reduction >= 0.5 * reduction_bar(own_reduction, f, min_reduction)]
-        members = [None] + near if near else []
+        members = [None] + singles if singles else []
     else:
         members = [chosen] + [f for f in singles if f.cands != chosen.cands and _paired(
             f.test_cluster_ssr, chosen.test_cluster_ssr) < z_worse]
