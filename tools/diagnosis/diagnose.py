@@ -259,7 +259,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                                               none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
-    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift)
+    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))

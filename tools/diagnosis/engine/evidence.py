@@ -346,7 +346,7 @@ def _join(judged, first: dict, other: dict, how: tuple | None = None) -> None:
     judged["verdict"] = "ambiguous"
 
 
-def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> None:
+def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=None) -> None:
     """A `none` (the verdict, or a member of the ambiguous set) claims that the data rule
     out every effect of a size that matters (spec.relevant_size: (below, above) the
     nominal value). A single physical effect whose 95 % interval reaches that far is as
@@ -359,7 +359,12 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> Non
     total offset from the user's model (a 1.03 mm table offset of which the +-1 mm
     calibration took 0.71 mm is not a `none` under a 1 mm size that matters). Intervals
     are read as the physical effect (report.physical_interval: less the model's measured
-    model-form bias, widened by its spread)."""
+    model-form bias, widened by its spread). prob (the problem none_eval was scored on):
+    an interval that reaches a size is checked by the model fixed at that size
+    (engine/boundary.py); a size clearly worse than `none` on the held-out windows is
+    excluded whatever the linearised interval says (not for offsets read through a
+    calibration shift or a model-form bias, whose sizes are not the model's values)."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import excluded
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
     sizes = getattr(spec, "relevant_size", None) or {}
     shift = shift or {}
@@ -367,6 +372,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> Non
                          or any(a["name"] == "none" for a in judged["ambiguous"])):
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
+    sized = [f for f in fits if len(f.cands) == 1 and f.physical
+             and sizes.get(f.cands[0].label(), sizes.get(f.cands[0].name)) is not None]
+    z_excl = worse_z(len(sized))
+    mf = getattr(spec, "model_form_bias", None) or {}
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = sizes.get(c.label(), sizes.get(c.name))
@@ -380,6 +389,19 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None) -> Non
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
         if nominal - lo >= size[0] or hi - nominal >= size[1]:
+            sides = []
+            if add == 0.0 and c.label() not in mf:
+                if nominal - lo >= size[0]:
+                    sides.append((nominal - size[0], lambda v, s=nominal - size[0]: v <= s))
+                if hi - nominal >= size[1]:
+                    sides.append((nominal + size[1], lambda v, s=nominal + size[1]: v >= s))
+            out, tested = excluded(prob, f, sides, none_eval, z_excl)
+            if tested:
+                judged.setdefault("size_tests", []).append(dict(
+                    name=c.label(), excluded=bool(out),
+                    tested=[dict(value=v, z_vs_none=z) for v, z in tested]))
+            if out:
+                continue
             row = fit_row(f, none_eval)
             row["values"] = [physical_interval(spec, c, v + add, 0.0, 0.0, 0.0)[0]
                              for v in row["values"]]

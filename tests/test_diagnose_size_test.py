@@ -1,0 +1,90 @@
+"""Issue 30: a `none` is left confident when the model fixed at the size that matters is
+clearly worse than the unmodified model on held-out windows, even where the linearised
+interval of the effect's fit reaches that size (engine/boundary.py)."""
+import numpy as np
+
+from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+from adaptive_c3.tools.diagnosis.engine.boundary import at_size, excluded
+from adaptive_c3.tools.diagnosis.engine.evidence import not_excluded, verdict
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, evaluate
+from adaptive_c3.tools.diagnosis.engine.locate import Windows
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+
+FRICTION = Candidate("friction_coefficient", "ee_ball")
+
+
+class SlipProblem(Problem):
+    """Windows whose residual is the distance of the EE-ball mu from the data's slip
+    response: a mu above `slip_at` acts as the model's 1 (the error is flat there),
+    below it the ball slips and the error grows with the gap to `truth_mu`."""
+
+    def __init__(self, spec, truth_mu: float, slip_at: float = 0.8, windows: int = 120):
+        rng = np.random.default_rng(3)
+        n = windows
+        W = Windows(np.zeros((n, 19)), np.zeros((n, 2, 19)), np.zeros((n, 3, 3)),
+                    np.arange(n) * 10, np.arange(n) // 12, np.arange(n) * 0.1)
+        super().__init__(spec, [], W, np.arange(n) % 3, np.ones((2, 19)), cluster_steps=50)
+        self.truth_mu, self.slip_at = truth_mu, slip_at
+        self.noise = rng.normal(0.0, 1.0, (n, 2, 19))
+
+    def _slip(self, mu):
+        return max(self.slip_at - mu, 0.0)
+
+    def residuals(self, effects, W):
+        mu = 1.0
+        for c, v in effects:
+            if c.name == "friction_coefficient":
+                mu = float(v[0])
+        idx = W.row // 10
+        gap = 6.0 * (self._slip(mu) - self._slip(self.truth_mu))
+        return self.noise[idx] + gap
+
+
+def _fric_fit(prob, value, ci):
+    f = Fit((FRICTION,), np.array([value]), np.array([ci]), np.array([0.3]), 0.0)
+    none_eval = evaluate(prob, None)
+    f.test_ssr, f.test_n, f.test_cluster_ssr, _ = evaluate(prob, f)
+    f.reduction = 1.0 - f.test_ssr / none_eval[0]
+    from adaptive_c3.tools.diagnosis.engine.fit import paired_z
+    f.z_vs_none = paired_z(none_eval[2], f.test_cluster_ssr)
+    f.score = f.test_ssr
+    return f, none_eval
+
+
+def _spec():
+    return ball_spec(load_scenario(str(SCENARIO_DIR / "ball_rolling.yaml"))[0])
+
+
+def test_a_size_the_data_rule_out_leaves_none_confident():
+    """Clean data (mu 1): the fit sits on the flat side (0.9) with an interval reaching
+    mu 0.5; mu fixed at 0.5 slips where the data do not, so `none` stays confident."""
+    spec = _spec()
+    prob = SlipProblem(spec, truth_mu=1.0)
+    fric, none_eval = _fric_fit(prob, 0.9, [0.2, 1.6])
+    assert at_size(prob, FRICTION, 0.5, none_eval) < -3.0
+    judged = verdict([fric], None, none_eval, 0.1)
+    assert judged["verdict"] == "none"
+    not_excluded(judged, spec, [fric], none_eval)            # the interval alone: joins
+    assert [a["name"] for a in judged["ambiguous"]] == ["none", "friction_coefficient"]
+    judged = verdict([fric], None, none_eval, 0.1)
+    not_excluded(judged, spec, [fric], none_eval, prob=prob)  # the size tested: excluded
+    assert judged["verdict"] == "none" and judged["ambiguous"] == []
+    assert judged["size_tests"][0]["excluded"] is True
+    assert judged["size_tests"][0]["tested"][0]["value"] == 0.5
+
+
+def test_a_size_the_data_support_still_joins_none():
+    """Data slipping like mu 0.4: mu fixed at 0.5 is better than the model's 1, so the
+    effect is not excluded; a fit beyond the size that beats `none` is never excluded."""
+    spec = _spec()
+    prob = SlipProblem(spec, truth_mu=0.4)
+    fric, none_eval = _fric_fit(prob, 0.9, [0.2, 1.6])
+    judged = verdict([fric], None, none_eval, 0.1)
+    not_excluded(judged, spec, [fric], none_eval, prob=prob)
+    assert [a["name"] for a in judged["ambiguous"]] == ["none", "friction_coefficient"]
+    assert judged["size_tests"][0]["excluded"] is False
+    beyond, _ = _fric_fit(prob, 0.4, [0.1, 0.7])
+    assert beyond.z_vs_none > 0
+    out, tested = excluded(prob, beyond, [(0.5, lambda v: v <= 0.5)], none_eval, 2.5)
+    assert out is False and tested == []

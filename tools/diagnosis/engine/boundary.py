@@ -1,0 +1,56 @@
+"""Whether the data rule out an effect at the size that matters: a direct test where the
+fitted interval cannot say.
+
+`evidence.not_excluded` lets an effect join `none` when its 95 % interval reaches a size
+that matters (spec.relevant_size). That interval is a linearisation at the fit's value,
+and where the error is flat there (an EE-ball mu above the slip a push asks for acts as
+the model's 1; a tiny drag changes little) it can be wide whatever the data say about
+the size that matters itself: on clean development draws 90009 and 90020 (Drake's
+plant, after one follow-up) EE-ball mu read 0.70-0.74 with intervals of 0.34..1.06 and
+-0.34..1.83, and the fit's held-out error was no better than the unmodified model's.
+
+The test: the model with the effect fixed at that size (the nominal value less / plus
+it, the sides the interval reaches) is rolled out on the held-out windows and compared
+with the unmodified model cluster by cluster (the paired z the verdict uses). The size
+is excluded when it is clearly worse, z <= -z_excl, on every side the interval reaches,
+and the fit's own value, where it lies beyond that size, is not better than `none` (a
+cost that is not monotone in the effect keeps the interval's answer). Nothing is fitted
+at the tested value, so all held-out windows are used once. z_excl is the rival rule's
+(evidence.worse_z over the effects with a size that matters).
+
+Measured so far on development draws only: on 90009 (clean) mu 0.5 scored z -0.82 and
+drag 0.1 z -1.29 on one recording, mu 0.5 z -0.29 after the follow-up, so neither was
+excluded and the verdict did not change; no hit rate with this test is measured yet.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate, paired_z
+
+
+def at_size(prob, cand, value: float, none_eval) -> float:
+    """Paired z (positive: better than the unmodified model) of `cand` fixed at `value`
+    (model units), over the held-out clusters of `prob` (none_eval = evaluate(prob, None))."""
+    f = Fit((cand,), np.array([float(value)]), np.zeros((1, 2)), np.zeros(1), 0.0)
+    _, _, per_cluster, _ = evaluate(prob, f)
+    return paired_z(none_eval[2], per_cluster)
+
+
+def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:
+    """(excluded, [(value, z)] tested): `sides` are the model-unit values of the sizes that
+    matter the fit's interval reaches. Excluded when each is clearly worse than `none`
+    (z <= -z_excl) and the fit's own value, when beyond one of them, is not better
+    (z_vs_none <= 0)."""
+    if prob is None or not sides or len(fit.cands) != 1 or len(fit.values) != 1:
+        return False, []
+    v = float(fit.values[0])
+    tested = []
+    for s, beyond in sides:
+        if beyond(v) and fit.z_vs_none > 0.0:
+            return False, tested
+        z = at_size(prob, fit.cands[0], s, none_eval)
+        tested.append((float(s), float(z)))
+        if z > -z_excl:
+            return False, tested
+    return True, tested
