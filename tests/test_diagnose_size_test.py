@@ -72,6 +72,9 @@ def test_a_size_the_data_rule_out_leaves_none_confident():
     assert judged["verdict"] == "none" and judged["ambiguous"] == []
     assert judged["size_tests"][0]["excluded"] is True
     assert judged["size_tests"][0]["tested"][0]["value"] == 0.5
+    from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
+    assert "Ruled out at the size that matters" in ambiguity_summary(judged)
+    assert "friction_coefficient[ee_ball] at 0.5" in ambiguity_summary(judged)
 
 
 def test_a_size_the_data_support_still_joins_none():

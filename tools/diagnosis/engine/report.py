@@ -124,11 +124,12 @@ def _fmt(v):
 
 
 def _judged(result) -> dict:
-    """report.json's verdict, ambiguous set, separating excitation and evidence windows."""
+    """report.json's verdict, ambiguous set, separating excitation, evidence windows and
+    the sizes that matter tested directly (engine/boundary.py)."""
     j = result.get("judged") or dict(verdict="none" if result["chosen"] is None else "named",
                                      ambiguous=[], separating_excitation=[])
-    return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence")
-            if k in j}
+    return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
+                              "size_tests") if k in j}
 
 
 def ambiguity_summary(report) -> str:
@@ -140,6 +141,11 @@ def ambiguity_summary(report) -> str:
         out = (f" {100 * ev['share_in_phases']:.0f}% of the held-out gain is in "
                f"{'/'.join(ev['phases']) or 'all'} windows (the largest: episode "
                f"{w['episode']}, {w['start']:.2f}-{w['end']:.2f} s, {w['phase']}).")
+    ruled = [f"{t['name']} at {' and '.join(_fmt(x['value']) for x in t['tested'])}"
+             for t in report.get("size_tests", []) if t["excluded"]]
+    if ruled:
+        out += (f" Ruled out at the size that matters (the model fixed there is clearly "
+                f"worse than without it on held-out windows): {', '.join(ruled)}.")
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "
