@@ -19,6 +19,8 @@ diagnosed and scored:
   ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
   excess cut     held-out rollout excess-over-noise (noisy data) before / after
   clean cut      the same against the noise-free states (NOISE_STD units)
+  size_excluded  effects whose size that matters the data ruled out directly
+                 (engine/boundary.py), though their interval reached it
 --follow-up: on an ambiguous verdict the harness records again with the gait change
 the report proposes (`separating_excitation[].excitation`, as its user would) and
 diagnoses both recordings together; `after_follow_up` scores the draws with that

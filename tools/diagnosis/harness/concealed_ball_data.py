@@ -391,7 +391,8 @@ def judged_fields(result, truth) -> dict:
                 in_ambiguous_set=(t in amb) if amb else None,
                 excess_before=eb, excess_after=ea, excess_cut=eb / max(ea, 1e-9),
                 nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
-                          for f in result.get("nuisance", [])])
+                          for f in result.get("nuisance", [])],
+                size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]])
 
 
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: bool = False,
