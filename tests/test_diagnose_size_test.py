@@ -89,5 +89,5 @@ def test_a_size_the_data_support_still_joins_none():
     assert judged["size_tests"][0]["excluded"] is False
     beyond, _ = _fric_fit(prob, 0.4, [0.1, 0.7])
     assert beyond.z_vs_none > 0
-    out, tested = excluded(prob, beyond, [(0.5, lambda v: v <= 0.5)], none_eval, 2.5)
+    out, tested = excluded(prob, beyond, [(0.5, -1)], none_eval, 2.5)
     assert out is False and tested == []

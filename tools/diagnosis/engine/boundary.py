@@ -38,16 +38,16 @@ def at_size(prob, cand, value: float, none_eval) -> float:
 
 
 def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:
-    """(excluded, [(value, z)] tested): `sides` are the model-unit values of the sizes that
-    matter the fit's interval reaches. Excluded when each is clearly worse than `none`
-    (z <= -z_excl) and the fit's own value, when beyond one of them, is not better
-    (z_vs_none <= 0)."""
+    """(excluded, [(value, z)] tested): `sides` are (value, direction) of the sizes that
+    matter the fit's interval reaches, in model units (direction -1: below the nominal
+    value, +1: above). Excluded when each is clearly worse than `none` (z <= -z_excl) and
+    the fit's own value, when at or beyond one of them, is not better (z_vs_none <= 0)."""
     if prob is None or not sides or len(fit.cands) != 1 or len(fit.values) != 1:
         return False, []
     v = float(fit.values[0])
     tested = []
-    for s, beyond in sides:
-        if beyond(v) and fit.z_vs_none > 0.0:
+    for s, direction in sides:
+        if direction * (v - s) >= 0.0 and fit.z_vs_none > 0.0:
             return False, tested
         z = at_size(prob, fit.cands[0], s, none_eval)
         tested.append((float(s), float(z)))

@@ -389,12 +389,12 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
         if nominal - lo >= size[0] or hi - nominal >= size[1]:
-            sides = []
+            sides = []                  # (size that matters, -1 below / +1 above)
             if add == 0.0 and c.label() not in mf:
                 if nominal - lo >= size[0]:
-                    sides.append((nominal - size[0], lambda v, s=nominal - size[0]: v <= s))
+                    sides.append((nominal - size[0], -1))
                 if hi - nominal >= size[1]:
-                    sides.append((nominal + size[1], lambda v, s=nominal + size[1]: v >= s))
+                    sides.append((nominal + size[1], +1))
             out, tested = excluded(prob, f, sides, none_eval, z_excl)
             if tested:
                 judged.setdefault("size_tests", []).append(dict(
