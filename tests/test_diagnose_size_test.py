@@ -7,8 +7,9 @@ from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.boundary import at_size, excluded
 from adaptive_c3.tools.diagnosis.engine.evidence import not_excluded, verdict
-from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, evaluate
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, evaluate, paired_z
 from adaptive_c3.tools.diagnosis.engine.locate import Windows
+from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
 
 FRICTION = Candidate("friction_coefficient", "ee_ball")
@@ -46,7 +47,6 @@ def _fric_fit(prob, value, ci):
     none_eval = evaluate(prob, None)
     f.test_ssr, f.test_n, f.test_cluster_ssr, _ = evaluate(prob, f)
     f.reduction = 1.0 - f.test_ssr / none_eval[0]
-    from adaptive_c3.tools.diagnosis.engine.fit import paired_z
     f.z_vs_none = paired_z(none_eval[2], f.test_cluster_ssr)
     f.score = f.test_ssr
     return f, none_eval
@@ -72,7 +72,6 @@ def test_a_size_the_data_rule_out_leaves_none_confident():
     assert judged["verdict"] == "none" and judged["ambiguous"] == []
     assert judged["size_tests"][0]["excluded"] is True
     assert judged["size_tests"][0]["tested"][0]["value"] == 0.5
-    from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
     assert "Ruled out at the size that matters" in ambiguity_summary(judged)
     assert "friction_coefficient[ee_ball] at 0.5" in ambiguity_summary(judged)
 

@@ -18,9 +18,10 @@ cost that is not monotone in the effect keeps the interval's answer). Nothing is
 at the tested value, so all held-out windows are used once. z_excl is the rival rule's
 (evidence.worse_z over the effects with a size that matters).
 
-Measured so far on development draws only: on 90009 (clean) mu 0.5 scored z -0.82 and
-drag 0.1 z -1.29 on one recording, mu 0.5 z -0.29 after the follow-up, so neither was
-excluded and the verdict did not change; no hit rate with this test is measured yet.
+On development draw 90009 (clean) mu 0.5 scored z -0.82 and drag 0.1 z -1.29 on one
+recording, mu 0.5 z -0.29 after the follow-up, so neither was excluded and the verdict
+did not change. The ninth evaluation set ran with the test (docs/diagnosis.md); how often
+it excluded an effect there was not recorded (the harness rows hold it from 388bf2d on).
 """
 from __future__ import annotations
 
