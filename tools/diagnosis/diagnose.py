@@ -43,6 +43,8 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (evidence_windows, free_
                                                   widen_for_phases, window_phases)
 from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
                                              widen_for_nuisance)
+from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
+from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (contact_summary, estimate_noise, locate,
                                                make_windows, prediction_floor)
 from adaptive_c3.tools.recording import RecordingError, load_recording
@@ -249,11 +251,16 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
         prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION),
         free_prob=long_problem(rec, spec, prob, P0, sigma, stride))
+    if any(chosen is f for f in fits):    # a calibration may have taken up part of it
+        refit_with_calibration(prob, chosen, nuisance, none_eval)
+        base = list(prob.base)
     from adaptive_c3.tools.diagnosis.engine.report import calibration_shift
     shift = calibration_shift(dict(nuisance=nuisance))
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)
+        if getattr(spec, "rugged_cost", False):
+            widen_to_held_out(prob, chosen)
         Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
                                               none_scored[3] - chosen.test_window_ssr,

@@ -30,12 +30,13 @@ import numpy as np
 from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate, paired_z
 
 
-def at_size(prob, cand, value: float, none_eval) -> float:
+def at_size(prob, cand, value: float, none_eval, per_cluster: bool = False):
     """Paired z (positive: better than the unmodified model) of `cand` fixed at `value`
-    (model units), over the held-out clusters of `prob` (none_eval = evaluate(prob, None))."""
+    (model units), over the held-out clusters of `prob` (none_eval = evaluate(prob, None));
+    per_cluster: that model's per-cluster SSR instead."""
     f = Fit((cand,), np.array([float(value)]), np.zeros((1, 2)), np.zeros(1), 0.0)
-    _, _, per_cluster, _ = evaluate(prob, f)
-    return paired_z(none_eval[2], per_cluster)
+    _, _, ssr, _ = evaluate(prob, f)
+    return ssr if per_cluster else paired_z(none_eval[2], ssr)
 
 
 def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:
@@ -55,3 +56,4 @@ def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:
         if z > -z_excl:
             return False, tested
     return True, tested
+

@@ -392,7 +392,9 @@ def judged_fields(result, truth) -> dict:
                 excess_before=eb, excess_after=ea, excess_cut=eb / max(ea, 1e-9),
                 nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
                           for f in result.get("nuisance", [])],
-                size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]])
+                size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]],
+                held_out_ci=getattr(result.get("chosen"), "held_out_ci", None),
+                joint_calibration=getattr(result.get("chosen"), "joint_calibration", None))
 
 
 def score_draw(seed: int, baseline: bool = True, pairs: bool = True, follow_up: bool = False,

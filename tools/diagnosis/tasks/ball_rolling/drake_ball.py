@@ -90,6 +90,10 @@ class DrakeBallSpec(BallSpec):
     # LM's forward differences: 1 % of the range / 20 (SAP is solved to a tolerance;
     # 1e-4 of it, the LCS's, gave Jacobians of solver noise and LM stopped at its start)
     jacobian_step: float = 1e-2
+    # a staircase of contact events: the chosen effect is refitted by a simplex with the
+    # kept calibrations free (engine/joint_refit.py) and its interval widened to the
+    # values held-out data do not reject (engine/boundary.held_out_interval)
+    rugged_cost: bool = True
     roller: object = None
     rollouts: OrderedDict = field(default_factory=OrderedDict)
 
