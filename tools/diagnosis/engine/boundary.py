@@ -56,4 +56,3 @@ def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:
         if z > -z_excl:
             return False, tested
     return True, tested
-

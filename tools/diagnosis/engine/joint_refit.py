@@ -10,18 +10,21 @@ read -1.68 mm; jointly (-2.11, -0.08) mm cut the fit's SSR from 20776 to 17280. 
 ninth evaluation set the EE-ball offsets read 0.2-1 mm from the truth with intervals
 0.05-1 mm wide.
 
-A gradient refit does not leave the sequential point on Drake's plant (its cost is
-rugged at any usable finite-difference step; widen_for_nuisance's joint LM returned its
-start there), so the refit is a Nelder-Mead simplex in the parameters scaled to their
-ranges: on all the fit windows, then per fold (the effect alone, the calibrations at
-their joint values) so that the held-out scores stay out-of-fold. The effect's interval
-is recentred on the joint value; its sd is the larger of the one it had and the joint
-sandwich's (which carries the effect's correlation with the calibration).
+A gradient refit does not leave the sequential point on Drake's plant (its cost is a
+staircase of contact events, engine/held_out.py; on draw 90010 widen_for_nuisance's joint
+LM returned its start), so the refit is a Nelder-Mead simplex in steps of value_scale (the
+fit grid's resolution): on all the fit windows, then per fold (the effect alone, the
+calibrations at their joint values) so that the held-out scores stay out-of-fold. Where
+no calibration is kept the simplex polishes the effect alone: LM also stops at its grid
+start there (dev draws 90055 and 90026, EE-ball offsets of 1.66 and 2.24 mm, both read
+2.50 mm, a grid point; 2.06 and 2.31 after). The effect's interval is recentred on the
+new value; its sd is the larger of the one it had and the joint sandwich's (which carries
+the effect's correlation with the calibration).
 
 A calibration of the pair the effect offsets itself is not refitted: the two are one
 quantity and the report gives their sum (report.calibration_shift). Specs opt in with
-`joint_calibration_refit` (the LCS's measured model form, BallSpec.model_form_bias, was
-calibrated on the sequential fit).
+`rugged_cost` (the LCS's measured model form, BallSpec.model_form_bias, was calibrated on
+the sequential fit).
 """
 from __future__ import annotations
 
@@ -80,8 +83,9 @@ def simplex_fit(prob: Problem, cands, x0, W, max_rollouts: int) -> tuple[np.ndar
 
 
 def refit_with_calibration(prob: Problem, fit: Fit | None, kept: list, none_eval) -> Fit | None:
-    """Refit `fit` (the chosen effect) with the calibration offsets among `kept` (fit_nuisance's
-    fits, whose effects are in prob.base) free. On a lower cost than the sequential fit's, the
+    """Refit `fit` (the chosen effect) by a simplex with the calibration offsets among `kept`
+    (fit_nuisance's fits, whose effects are in prob.base) free, if any. On a lower cost than
+    the sequential fit's, the
     fit's values, fold values, scores and interval, the kept calibrations' values and
     prob.base change in place. Returns the fit."""
     spec = prob.spec

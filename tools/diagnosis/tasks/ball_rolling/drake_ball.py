@@ -92,7 +92,7 @@ class DrakeBallSpec(BallSpec):
     jacobian_step: float = 1e-2
     # a staircase of contact events: the chosen effect is refitted by a simplex with the
     # kept calibrations free (engine/joint_refit.py) and its interval widened to the
-    # values held-out data do not reject (engine/boundary.held_out_interval)
+    # values held-out data do not reject (engine/held_out.py)
     rugged_cost: bool = True
     roller: object = None
     rollouts: OrderedDict = field(default_factory=OrderedDict)
