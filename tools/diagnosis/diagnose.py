@@ -259,8 +259,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if chosen is not None:
         widen_for_phases(scored, chosen)
         widen_for_nuisance(prob, chosen, user_base, nuisance)
-        if getattr(spec, "rugged_cost", False):
-            widen_to_held_out(prob, chosen)
+        widen_to_held_out(prob, chosen)
         Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
                                               none_scored[3] - chosen.test_window_ssr,

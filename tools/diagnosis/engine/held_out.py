@@ -129,7 +129,10 @@ def held_out_interval(prob, fit, z_crit: float = INTERVAL_Z) -> tuple[float, flo
 
 def widen_to_held_out(prob, fit) -> None:
     """The fit's 95 % interval extended to its held_out_interval (sd rescaled to match,
-    at the interval's quantile); recorded as fit.held_out_ci."""
+    at the interval's quantile); recorded as fit.held_out_ci. Specs opt in with
+    `rugged_cost`, as for joint_refit.refit_with_calibration."""
+    if fit is None or not getattr(prob.spec, "rugged_cost", False):
+        return
     edges = held_out_interval(prob, fit)
     if edges is None:
         return
