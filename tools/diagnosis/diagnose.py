@@ -45,8 +45,9 @@ from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, fit_
                                              widen_for_nuisance)
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
-from adaptive_c3.tools.diagnosis.engine.locate import (contact_summary, estimate_noise, locate,
-                                               make_windows, prediction_floor)
+from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
+                                                       estimate_noise, locate, make_windows,
+                                                       prediction_floor)
 from adaptive_c3.tools.recording import RecordingError, load_recording
 
 HORIZON = 10          # rollout steps for fitting, locating and the reported errors
@@ -270,6 +271,12 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
              for k in prob.folds}
+    # the reported errors in units of the calibrated noise where the backend supports it
+    # (the fit keeps the one-step estimate its rules were set with): a perfect model's
+    # excess over noise is then ~0
+    sigma_report = calibrate_noise(spec, rec, P0, sigma) \
+        if getattr(spec, "calibrated_noise", False) else sigma
+    floor_report = prediction_floor(P0, sigma_report, horizon)
     es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
     E1, e1 = W1.take(np.arange(len(W1)) % es == 0), fold1[::es]
     EH, eH = WH.take(np.arange(len(WH)) % es == 0), foldH[::es]
@@ -277,13 +284,14 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     errors = {}
     for tag, models in (("before", before), ("after", after)):
         errors[tag] = dict(
-            one_step=error_table(spec, models, E1, e1, floor),
-            rollout=error_table(spec, models, EH, eH, floor),
+            one_step=error_table(spec, models, E1, e1, floor_report),
+            rollout=error_table(spec, models, EH, eH, floor_report),
             inside_mismatch_windows=dict(
-                one_step=error_table(spec, models, E1, e1, floor, inside1),
-                rollout=error_table(spec, models, EH, eH, floor, insideH)))
+                one_step=error_table(spec, models, E1, e1, floor_report, inside1),
+                rollout=error_table(spec, models, EH, eH, floor_report, insideH)))
     bar.close()
-    return dict(spec=spec, base=base, sigma=sigma, floor=floor, windows=windows, steps=steps,
+    return dict(spec=spec, base=base, sigma=sigma, floor=floor, sigma_report=sigma_report,
+                floor_report=floor_report, windows=windows, steps=steps,
                 W1=W1, WH=WH, fold1=fold1, foldH=foldH, split=split_note, chosen=chosen,
                 fits=fits, none_eval=none_eval, not_applicable=not_applicable,
                 P0=P0, P_user=P_user, P1=P1, P1_folds=after, errors=errors,

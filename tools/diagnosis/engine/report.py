@@ -383,7 +383,9 @@ def write_report(out: Path, rec, result, scenario_notes=()) -> dict:
         nuisance=[dict(effect_params(f, spec)[0], ssr_reduction=float(f.reduction),
                        note=NUISANCE_NOTES.get(f.cands[0].name, NUISANCE_NOTES[""]))
                   for f in result.get("nuisance", [])],
-        noise_floor={n: float(s) for n, s in zip(spec.state_names, result["sigma"])},
+        noise_floor={n: float(s) for n, s in zip(spec.state_names,
+                                                 result.get("sigma_report", result["sigma"]))},
+        noise_floor_one_step={n: float(s) for n, s in zip(spec.state_names, result["sigma"])},
         mismatch_windows=result["windows"],
         mismatch_windows_total=int(result["steps"]["total_windows"]),
         contact_agreement=result["contact"],

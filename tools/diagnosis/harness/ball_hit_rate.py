@@ -17,7 +17,8 @@ diagnosed and scored:
                  below it `none` is a right answer (below_size: those draws' answers)
   in_interval    named, and the effective truth inside the reported 95% interval
   ambiguous      the verdict is ambiguous; in_ambiguous_set: the truth is in the set
-  excess cut     held-out rollout excess-over-noise (noisy data) before / after
+  excess cut     held-out rollout excess-over-noise (noisy data) before / after (in the
+                 calibrated noise; after at least concealed_ball_data.EXCESS_RESOLUTION)
   clean cut      the same against the noise-free states (NOISE_STD units)
   size_excluded  effects whose size that matters the data ruled out directly
                  (engine/boundary.py), though their interval reached it
