@@ -147,12 +147,17 @@ def _split(theta, cands, spec):
     return out
 
 
+def bounds_of(cands, spec) -> tuple[np.ndarray, np.ndarray]:
+    """(lower, upper) bounds of the stacked parameters of a candidate list."""
+    return (np.concatenate([c.bounds(spec)[0] for c in cands]),
+            np.concatenate([c.bounds(spec)[1] for c in cands]))
+
+
 def fit_candidates(prob: Problem, cands, init=None, ci: bool = True, W=None) -> Fit:
     """Least-squares fit of one candidate or a set (jointly) on windows W (default: all)."""
     spec = prob.spec
     W = prob.used() if W is None else W
-    lo = np.concatenate([c.bounds(spec)[0] for c in cands])
-    hi = np.concatenate([c.bounds(spec)[1] for c in cands])
+    lo, hi = bounds_of(cands, spec)
 
     def fun(theta):
         return prob.residuals(_split(theta, cands, spec), W).ravel()

@@ -34,7 +34,7 @@ import numpy as np
 from scipy.optimize import minimize
 
 from adaptive_c3.tools.diagnosis.engine.fit import (Fit, Problem, _jacobian, _sandwich_sd,
-                                                    _split, score_fit)
+                                                    _split, bounds_of, score_fit)
 
 SIMPLEX_STEP = 0.5           # the first simplex: this share of each value_scale
 X_TOL = 0.05                 # ... stop when it is this small (in those steps)
@@ -63,8 +63,7 @@ def _offset_pairs(fit: Fit, spec) -> set:
 def simplex_fit(prob: Problem, cands, x0, W, max_rollouts: int) -> tuple[np.ndarray, float]:
     """Nelder-Mead on the summed squared residuals over windows W, from x0 (bounded)."""
     spec = prob.spec
-    lo = np.concatenate([c.bounds(spec)[0] for c in cands])
-    hi = np.concatenate([c.bounds(spec)[1] for c in cands])
+    lo, hi = bounds_of(cands, spec)
     step = np.concatenate([np.full(c.num_params(spec), SIMPLEX_STEP * value_scale(spec, c))
                            for c in cands])
     x0 = np.clip(np.asarray(x0, float), lo, hi)
@@ -115,8 +114,7 @@ def refit_with_calibration(prob: Problem, fit: Fit | None, kept: list, none_eval
         fit.fold_values[k], _ = simplex_fit(prob, list(fit.cands), fit.fold_values[k] + shift,
                                              prob.train(k), MAX_ROLLOUTS // 2)
     # the joint sandwich: the effect's sd with the calibration free beside it
-    lo = np.concatenate([c.bounds(spec)[0] for c in cands])
-    hi = np.concatenate([c.bounds(spec)[1] for c in cands])
+    lo, hi = bounds_of(cands, spec)
     r = joint_prob.residuals(_split(x, cands, spec), W).ravel()
     Jt = _jacobian(lambda th: joint_prob.residuals(_split(th, cands, spec), W).ravel(), x, r,
                    lo, hi, np.maximum(np.abs(hi - lo) / 20.0, 1e-6),
