@@ -84,9 +84,8 @@ def simplex_fit(prob: Problem, cands, x0, W, max_rollouts: int) -> tuple[np.ndar
 def refit_with_calibration(prob: Problem, fit: Fit | None, kept: list, none_eval) -> Fit | None:
     """Refit `fit` (the chosen effect) by a simplex with the calibration offsets among `kept`
     (fit_nuisance's fits, whose effects are in prob.base) free, if any. On a lower cost than
-    the sequential fit's, the
-    fit's values, fold values, scores and interval, the kept calibrations' values and
-    prob.base change in place. Returns the fit."""
+    the sequential fit's, the fit's values, fold values, scores and interval, the kept
+    calibrations' values and prob.base change in place. Returns the fit."""
     spec = prob.spec
     if fit is None or not getattr(spec, "rugged_cost", False):
         return fit

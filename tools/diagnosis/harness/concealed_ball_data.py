@@ -71,10 +71,11 @@ G = 9.81
 NOISE_STD = np.concatenate([[5e-4] * 3, [2e-3] * 4, [5e-4] * 3, [5e-3] * 3, [0.15] * 3,
                             [5e-3] * 3])
 # The excess over noise a perfect model reads: the reported errors are in units of the
-# calibrated noise (engine/locate.py calibrate_noise), which development draws 90064,
-# 90065 and 90083 (Drake's plant, the nominal model on clean data without and with the
-# second-engine variation) put within a few % of the noise, the perfect model's excess at
-# 0-0.16. A smaller excess after a fit is reported, but the cut divides by at least this.
+# calibrated noise (engine/locate.py calibrate_noise, 0.83-1.19x the true noise per state on
+# development draws 8003 and 90065), in which Drake's unmodified plant on clean development
+# draws 90064, 90065 and 90083 (without and with the second-engine variation) read an
+# excess of 0-0.16. A smaller excess after a fit is reported, but the cut divides by at
+# least this.
 EXCESS_RESOLUTION = 0.2
 OMEGA0_TRUE = 0.2          # rad/s: rolling-resistance torque saturates above this spin
 
