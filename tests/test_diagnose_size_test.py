@@ -1,6 +1,8 @@
 """Issue 30: a `none` is left confident when the model fixed at the size that matters is
 clearly worse than the unmodified model on held-out windows, even where the linearised
 interval of the effect's fit reaches that size (engine/boundary.py)."""
+import copy
+
 import numpy as np
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
@@ -90,3 +92,56 @@ def test_a_size_the_data_support_still_joins_none():
     assert beyond.z_vs_none > 0
     out, tested = excluded(prob, beyond, [(0.5, -1)], none_eval, 2.5)
     assert out is False and tested == []
+
+
+def _with_rugged_cost(spec, rugged: bool):
+    out = copy.copy(spec)
+    out.rugged_cost = rugged
+    return out
+
+
+class StepProblem(SlipProblem):
+    """SlipProblem with a step in the cost: values within 0.05 of `step_at` add a large
+    error (a contact event a rugged cost's local fit can stop beside)."""
+
+    def __init__(self, spec, truth_mu: float, step_at: float = 0.6, **kw):
+        super().__init__(spec, truth_mu, **kw)
+        self.step_at = step_at
+
+    def residuals(self, effects, W):
+        r = super().residuals(effects, W)
+        mu = next((float(v[0]) for c, v in effects if c.name == "friction_coefficient"), 1.0)
+        return r + (8.0 if abs(mu - self.step_at) < 0.05 else 0.0)
+
+
+def test_a_fit_worse_than_none_is_judged_at_the_size_that_matters():
+    """Data slipping like mu 0.35, the fit stopped on a step at 0.6 with a tight interval
+    (clearly worse than `none` on held-out windows): its interval is not read on a rugged
+    cost, mu fixed at 0.5 is tested and, better than the model's 1, joins `none`; the
+    same fit on a smooth-cost spec keeps the interval's answer (left out)."""
+    spec = _spec()
+    prob = StepProblem(spec, truth_mu=0.35)
+    stuck, none_eval = _fric_fit(prob, 0.6, [0.58, 0.62])
+    assert stuck.z_vs_none < 0
+    for rugged, joins in ((False, False), (True, True)):
+        prob.spec = _with_rugged_cost(spec, rugged)
+        judged = verdict([stuck], None, none_eval, 0.1)
+        assert judged["verdict"] == "none"
+        not_excluded(judged, prob.spec, [stuck], none_eval, prob=prob)
+        names = [a["name"] for a in judged["ambiguous"]]
+        assert names == (["none", "friction_coefficient"] if joins else [])
+    assert judged["size_tests"][0]["tested"][0]["value"] == 0.5
+    assert judged["size_tests"][0]["tested"][0]["z_vs_none"] > 0
+    assert "not read" in judged["ambiguous"][1]["note"]
+
+
+def test_a_stuck_fit_on_clean_data_is_still_ruled_out_at_size():
+    """Clean data (mu 1) and a fit stopped on the step at 0.6: mu 0.5 slips where the data
+    do not, so the direct test excludes it and `none` stays confident."""
+    spec = _with_rugged_cost(_spec(), True)
+    prob = StepProblem(spec, truth_mu=1.0)
+    stuck, none_eval = _fric_fit(prob, 0.6, [0.58, 0.62])
+    judged = verdict([stuck], None, none_eval, 0.1)
+    not_excluded(judged, spec, [stuck], none_eval, prob=prob)
+    assert judged["verdict"] == "none" and judged["ambiguous"] == []
+    assert judged["size_tests"][0]["excluded"] is True

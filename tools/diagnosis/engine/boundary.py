@@ -56,3 +56,31 @@ def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:
         if z > -z_excl:
             return False, tested
     return True, tested
+
+
+def untrusted_interval(spec, fit, free, prob) -> bool:
+    """A fit whose interval says nothing about the sizes beyond it: on a staircase cost
+    (spec.rugged_cost) a candidate that is not chosen keeps its local fit's sandwich
+    interval, and a fit that stopped on a step can be clearly worse than `none` on the
+    held-out windows with an interval a few % wide (development draw 90092, EE-ball mu
+    0.35: mu read 0.60 [0.579, 0.621] with a held-out SSR 3.6x the other candidates',
+    so mu 0.5 was never tested and the truth left the ambiguous set). Such a fit
+    (z_vs_none < 0, its interval from all windows, not the free ones) is judged by the
+    model fixed at the size that matters instead (at_size, `excluded`)."""
+    return (prob is not None and bool(getattr(spec, "rugged_cost", False))
+            and fit.cands not in free and fit.z_vs_none < 0.0)
+
+
+def size_sides(cand, spec, nominal: float, size, interval=None) -> list:
+    """[(value, direction)]: the sizes that matter below (-1) and above (+1) the nominal
+    value that `interval` (lo, hi) reaches, or, with no interval to read, every finite
+    one within the candidate's bounds."""
+    lo_b, hi_b = (float(b[0]) for b in cand.bounds(spec))
+    out = []
+    for value, direction in ((nominal - size[0], -1), (nominal + size[1], +1)):
+        if interval is None:
+            if np.isfinite(value) and lo_b <= value <= hi_b:
+                out.append((value, direction))
+        elif interval[0] <= value if direction < 0 else interval[1] >= value:
+            out.append((value, direction))
+    return out

@@ -364,7 +364,8 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     (engine/boundary.py); a size clearly worse than `none` on the held-out windows is
     excluded whatever the linearised interval says (not for offsets read through a
     calibration shift or a model-form bias, whose sizes are not the model's values)."""
-    from adaptive_c3.tools.diagnosis.engine.boundary import excluded
+    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, size_sides,
+                                                            untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
     sizes = getattr(spec, "relevant_size", None) or {}
     shift = shift or {}
@@ -388,13 +389,14 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         add = shift.get(c.target, 0.0) if c.name == "contact_offset" else 0.0
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
-        if nominal - lo >= size[0] or hi - nominal >= size[1]:
+        direct = add == 0.0 and c.label() not in mf
+        reaches = nominal - lo >= size[0] or hi - nominal >= size[1]
+        untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob) \
+            and bool(size_sides(c, spec, nominal, size))
+        if reaches or untrusted:
             sides = []                  # (size that matters, -1 below / +1 above)
-            if add == 0.0 and c.label() not in mf:
-                if nominal - lo >= size[0]:
-                    sides.append((nominal - size[0], -1))
-                if hi - nominal >= size[1]:
-                    sides.append((nominal + size[1], +1))
+            if direct:
+                sides = size_sides(c, spec, nominal, size, None if untrusted else (lo, hi))
             out, tested = excluded(prob, f, sides, none_eval, z_excl)
             if tested:
                 judged.setdefault("size_tests", []).append(dict(
@@ -405,11 +407,14 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
             row = fit_row(f, none_eval)
             row["values"] = [physical_interval(spec, c, v + add, 0.0, 0.0, 0.0)[0]
                              for v in row["values"]]
+            why = (f"its fit is worse than `none` on the held-out windows, so its interval "
+                   f"{lo:.3g}..{hi:.3g} is not read, and the size that matters (the model's "
+                   f"{nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}) is not clearly worse than "
+                   f"`none` there" if untrusted else
+                   f"its 95 % interval {lo:.3g}..{hi:.3g} reaches a size that matters (the "
+                   f"model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}){where}")
             _join(judged, fit_row(None, none_eval), dict(
-                row, ci95=[float(lo), float(hi)],
-                note=f"not excluded: its 95 % interval {lo:.3g}..{hi:.3g} reaches a size "
-                     f"that matters (the model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g})"
-                     f"{where}"))
+                row, ci95=[float(lo), float(hi)], note=f"not excluded: {why}"))
 
 
 def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
