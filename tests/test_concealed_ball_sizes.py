@@ -65,3 +65,20 @@ def test_the_true_ball_has_the_drawn_radius():
     _, _, clean = concealed_draw(seed, name="none", episodes=1, duration_s=0.05, params=p)
     assert clean[0, 9] == pytest.approx(p.ball_radius + var.ball_dr + var.table_dz, abs=1e-5)
 
+
+
+def test_an_episode_ends_before_the_ball_rolls_off_the_table():
+    """Release pushes at 0.4 m/s along +x from x ~ 0.55 m would roll the ball past the
+    table's edge (x = 1 m) within the 4 s episode: the recording stops with the ball's
+    centre two radii inside the edge, still resting on the table top."""
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import make_recording
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Excitation
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import TABLE_SIZE
+    ex = Excitation().changed(release_speed=[0.4, 0.45], directions="axes", duration_s=4.0,
+                              episodes=1, release_fraction=1.0)
+    rec, clean = make_recording(Truth("none", "", 0.0, ""), seed=3, excitation=ex)
+    ball_r = ModelParams().ball_radius
+    assert len(rec.t) < 400                                  # ended early
+    assert clean[:, 7].max() > 0.8                           # it did roll towards the edge
+    assert np.abs(clean[:, 7:9]).max() < 0.5 * TABLE_SIZE - 2 * ball_r + 0.01
+    assert clean[:, 9].min() > ball_r - 1e-3                 # never below the table top
