@@ -363,7 +363,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     an interval that reaches a size is checked by the model fixed at that size
     (engine/boundary.py); a size clearly worse than `none` on the held-out windows is
     excluded whatever the linearised interval says (not for offsets read through a
-    calibration shift or a model-form bias, whose sizes are not the model's values)."""
+    calibration shift or a model-form bias, whose sizes are not the model's values). On a
+    rugged cost, a fit worse than `none` on the held-out windows has its interval left
+    unread and the sizes that matter tested directly (boundary.untrusted_interval)."""
     from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, size_sides,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
