@@ -66,7 +66,6 @@ def test_the_true_ball_has_the_drawn_radius():
     assert clean[0, 9] == pytest.approx(p.ball_radius + var.ball_dr + var.table_dz, abs=1e-5)
 
 
-
 def test_an_episode_ends_before_the_ball_rolls_off_the_table():
     """Release pushes at 0.4 m/s along +x from x ~ 0.55 m would roll the ball past the
     table's edge (x = 1 m) within the 4 s episode: the recording stops with the ball's

@@ -62,6 +62,7 @@ from dataclasses import asdict, dataclass
 import numpy as np
 
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Excitation, Pusher
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import TABLE_SIZE
 from adaptive_c3.tools.diagnosis.harness.concealed_data import Truth, _either
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
 
@@ -250,16 +251,15 @@ class TruePlant:
 
 
 def on_table(x, ball_r: float) -> bool:
-    """The ball's centre at least two radii inside the table's edge: an episode ends there,
-    as an operator would stop a ball rolling off the rig. The table is TABLE_SIZE wide
-    about the world origin; the diagnosis's model world (ball_plant, its copies side by
-    side on one long table) has no edge where the data's ball would fall. Before this
-    bound, release pushes at 0.15-0.25 m/s rolled the ball off the edge in 2 of the 25
-    follow-up episodes of the eleventh set's draw 98021 (ball z down to -0.2 m), and the
-    unmodified model's error against the noise-free states over both recordings was 6.4x
-    the noise, in no effect's terms (the episode's other bound, 0.8 m from the gait's
-    centre at x = 0.55 m, lies beyond the edge)."""
-    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import TABLE_SIZE
+    """The ball's centre at least two radii inside the table's edge; an episode ends where
+    it is not, as an operator would stop a ball rolling off the rig. The table is
+    TABLE_SIZE wide about the world origin; the diagnosis's model world (ball_plant, its
+    copies side by side on one long table) has no edge where the data's ball would fall.
+    Before this bound, release pushes at 0.15-0.25 m/s rolled the ball off the edge in 2
+    of the 25 follow-up episodes of the eleventh set's draw 98021 (ball z down to -0.2 m),
+    and the unmodified model's error against the noise-free states over both recordings
+    was 6.4x the noise, in no effect's terms (the episode's other bound, 0.8 m from the
+    gait's centre at x = 0.55 m, lies beyond the edge)."""
     edge = 0.5 * TABLE_SIZE - 2.0 * ball_r
     return abs(x[7]) < edge and abs(x[8]) < edge
 
