@@ -79,3 +79,25 @@ def test_an_effect_too_small_to_matter_is_right_as_none():
     # named effect draws (interval, excess cut): the answers that name the true effect
     assert s["named_effect_count"] == 2
     assert s["per_effect"]["mass_scale[ball]"]["confident_right"] == 2
+
+
+def test_a_row_keeps_why_each_member_joined_and_the_size_tests():
+    """The harness row keeps each ambiguous member's note and every size test, so how
+    often a rule let an effect join `none` can be counted on an evaluation set."""
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import Truth, judged_fields
+    note = "not excluded: its fit is worse than `none` on the held-out windows, ..."
+    tests = [dict(name="friction_coefficient[ee_ball]", excluded=False,
+                  tested=[dict(value=0.5, z_vs_none=-0.45)]),
+             dict(name="mass_scale[ball]", excluded=True,
+                  tested=[dict(value=0.5, z_vs_none=-4.0), dict(value=2.0, z_vs_none=-3.9)])]
+    errors = {tag: dict(rollout=dict(excess_over_noise=e)) for tag, e in (("before", 1.2),
+                                                                         ("after", 0.3))}
+    result = dict(judged=dict(verdict="ambiguous", size_tests=tests, ambiguous=[
+        dict(name="none", target=""),
+        dict(name="friction_coefficient", target="ee_ball", note=note)]), errors=errors)
+    row = judged_fields(result, Truth("friction_coefficient", "ee_ball", 0.35, "1"))
+    assert row["in_ambiguous_set"] is True
+    assert row["ambiguous_notes"] == ["", note]
+    assert row["size_excluded"] == ["mass_scale[ball]"]
+    assert row["size_tests"] == tests
+    assert row["excess_cut"] == 1.2 / 0.3

@@ -21,7 +21,10 @@ diagnosed and scored:
                  calibrated noise; after at least concealed_ball_data.EXCESS_RESOLUTION)
   clean cut      the same against the noise-free states (NOISE_STD units)
   size_excluded  effects whose size that matters the data ruled out directly
-                 (engine/boundary.py), though their interval reached it
+                 (engine/boundary.py), though their interval reached it or was not read
+  size_tests     every such test: the effect, the sizes tried and their z against `none`
+  ambiguous_notes  per member of the ambiguous set, why it joined (e.g. "not excluded:
+                 its fit is worse than `none` ..., so its interval ... is not read")
 --follow-up: on an ambiguous verdict the harness records again with the gait change
 the report proposes (`separating_excitation[].excitation`, as its user would) and
 diagnoses both recordings together; `after_follow_up` scores the draws with that

@@ -404,7 +404,8 @@ def apply_size_rule(row, truth: Truth, spec) -> dict:
 
 
 def judged_fields(result, truth) -> dict:
-    """Verdict, ambiguous set and whether the truth is in it; noisy excess-over-noise."""
+    """Verdict, ambiguous set (and each member's note: why it joined) and whether the truth
+    is in it; noisy excess-over-noise; the size tests (engine/boundary.py)."""
     j = result.get("judged") or {}
     amb = [label(a["name"], a["target"]) for a in j.get("ambiguous", [])]
     t = label(truth.name, truth.target)
@@ -416,6 +417,8 @@ def judged_fields(result, truth) -> dict:
                 nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
                           for f in result.get("nuisance", [])],
                 size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]],
+                size_tests=list(j.get("size_tests", [])),
+                ambiguous_notes=[a.get("note", "") for a in j.get("ambiguous", [])],
                 held_out_ci=getattr(result.get("chosen"), "held_out_ci", None),
                 joint_calibration=getattr(result.get("chosen"), "joint_calibration", None))
 
