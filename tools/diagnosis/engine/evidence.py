@@ -393,30 +393,32 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
                                          hi + add, float(src.sd[0]))
         direct = add == 0.0 and c.label() not in mf
         reaches = nominal - lo >= size[0] or hi - nominal >= size[1]
-        untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob) \
-            and bool(size_sides(c, spec, nominal, size))
-        if reaches or untrusted:
-            sides = []                  # (size that matters, -1 below / +1 above)
-            if direct:
-                sides = size_sides(c, spec, nominal, size, None if untrusted else (lo, hi))
-            out, tested = excluded(prob, f, sides, none_eval, z_excl)
-            if tested:
-                judged.setdefault("size_tests", []).append(dict(
-                    name=c.label(), excluded=bool(out),
-                    tested=[dict(value=v, z_vs_none=z) for v, z in tested]))
-            if out:
-                continue
-            row = fit_row(f, none_eval)
-            row["values"] = [physical_interval(spec, c, v + add, 0.0, 0.0, 0.0)[0]
-                             for v in row["values"]]
-            why = (f"its fit is worse than `none` on the held-out windows, so its interval "
-                   f"{lo:.3g}..{hi:.3g} is not read, and the size that matters (the model's "
-                   f"{nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}) is not clearly worse than "
-                   f"`none` there" if untrusted else
-                   f"its 95 % interval {lo:.3g}..{hi:.3g} reaches a size that matters (the "
-                   f"model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}){where}")
-            _join(judged, fit_row(None, none_eval), dict(
-                row, ci95=[float(lo), float(hi)], note=f"not excluded: {why}"))
+        untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob)
+        if not (reaches or untrusted):
+            continue
+        # (size that matters, -1 below / +1 above): those the interval reaches, or all
+        sides = size_sides(c, spec, nominal, size, None if untrusted else (lo, hi)) \
+            if direct else []
+        if untrusted and not sides:
+            continue
+        out, tested = excluded(prob, f, sides, none_eval, z_excl)
+        if tested:
+            judged.setdefault("size_tests", []).append(dict(
+                name=c.label(), excluded=bool(out),
+                tested=[dict(value=v, z_vs_none=z) for v, z in tested]))
+        if out:
+            continue
+        row = fit_row(f, none_eval)
+        row["values"] = [physical_interval(spec, c, v + add, 0.0, 0.0, 0.0)[0]
+                         for v in row["values"]]
+        why = (f"its fit is worse than `none` on the held-out windows, so its interval "
+               f"{lo:.3g}..{hi:.3g} is not read, and the size that matters (the model's "
+               f"{nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}) is not clearly worse than "
+               f"`none` there" if untrusted else
+               f"its 95 % interval {lo:.3g}..{hi:.3g} reaches a size that matters (the "
+               f"model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}){where}")
+        _join(judged, fit_row(None, none_eval), dict(
+            row, ci95=[float(lo), float(hi)], note=f"not excluded: {why}"))
 
 
 def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
