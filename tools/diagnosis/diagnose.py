@@ -257,10 +257,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         base = list(prob.base)
     from adaptive_c3.tools.diagnosis.engine.report import calibration_shift
     shift = calibration_shift(dict(nuisance=nuisance))
-    if chosen is not None:
-        widen_for_phases(scored, chosen)
-        widen_for_nuisance(prob, chosen, user_base, nuisance)
-        widen_to_held_out(prob, chosen)
+    if chosen is not None:     # on the windows it was judged on (for a free-ball choice
+        widen_for_phases(scored, chosen)    # the free ones: pushes say little of drag)
+        widen_for_nuisance(scored, chosen, user_base, nuisance)
+        widen_to_held_out(scored, chosen)
         Wu = scored.used()
         judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
                                               none_scored[3] - chosen.test_window_ssr,
