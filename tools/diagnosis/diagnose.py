@@ -257,8 +257,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         base = list(prob.base)
     from adaptive_c3.tools.diagnosis.engine.report import calibration_shift
     shift = calibration_shift(dict(nuisance=nuisance))
-    if chosen is not None:     # on the windows it was judged on (for a free-ball choice
-        widen_for_phases(scored, chosen)    # the free ones: pushes say little of drag)
+    if chosen is not None:
+        # widened on the windows it was judged on: for a free-ball choice the free ones,
+        # since over the pushes the nuisances loosen a drag's interval until it holds 0
+        widen_for_phases(scored, chosen)
         widen_for_nuisance(scored, chosen, user_base, nuisance)
         widen_to_held_out(scored, chosen)
         Wu = scored.used()
