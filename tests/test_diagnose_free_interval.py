@@ -2,7 +2,6 @@
 where the ball coasts or rests without the EE; its interval is widened on those windows
 too (diagnose.py), not on the pushes, which say little of it."""
 import numpy as np
-import pytest
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.diagnose import diagnose
