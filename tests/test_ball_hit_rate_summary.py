@@ -92,12 +92,15 @@ def test_a_row_keeps_why_each_member_joined_and_the_size_tests():
                   tested=[dict(value=0.5, z_vs_none=-4.0), dict(value=2.0, z_vs_none=-3.9)])]
     errors = {tag: dict(rollout=dict(excess_over_noise=e)) for tag, e in (("before", 1.2),
                                                                          ("after", 0.3))}
+    reason = "viscous_damping[ball]: its 95 % interval holds the model's value"
     result = dict(judged=dict(verdict="ambiguous", size_tests=tests, ambiguous=[
-        dict(name="none", target=""),
+        dict(name="viscous_damping", target="ball"),
+        dict(name="none", target="", reason=reason),
         dict(name="friction_coefficient", target="ee_ball", note=note)]), errors=errors)
     row = judged_fields(result, Truth("friction_coefficient", "ee_ball", 0.35, "1"))
     assert row["in_ambiguous_set"] is True
-    assert row["ambiguous_notes"] == ["", note]
+    # a not_excluded member's `note`, and require_support's `reason` for `none`
+    assert row["ambiguous_notes"] == ["", reason, note]
     assert row["size_excluded"] == ["mass_scale[ball]"]
     assert row["size_tests"] == tests
     assert row["excess_cut"] == 1.2 / 0.3

@@ -23,8 +23,9 @@ diagnosed and scored:
   size_excluded  effects whose size that matters the data ruled out directly
                  (engine/boundary.py), though their interval reached it or was not read
   size_tests     every such test: the effect, the sizes tried and their z against `none`
-  ambiguous_notes  per member of the ambiguous set, why it joined (e.g. "not excluded:
-                 its fit is worse than `none` ..., so its interval ... is not read")
+  ambiguous_notes  per member of the ambiguous set, why it joined (its `note`, e.g. "not
+                 excluded: its fit is worse than `none` ...", or require_support's
+                 `reason`: the chosen effect's interval holds the model's value)
 --follow-up: on an ambiguous verdict the harness records again with the gait change
 the report proposes (`separating_excitation[].excitation`, as its user would) and
 diagnoses both recordings together; `after_follow_up` scores the draws with that
