@@ -12,9 +12,9 @@ from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import Variation, concealed_draw
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
-from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, _paired, not_excluded, verdict,
+from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, not_excluded, verdict,
                                                         worse_z)
-from adaptive_c3.tools.diagnosis.engine.fit import Fit
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, paired_z
 
 BALL = str(SCENARIO_DIR / "ball_rolling.yaml")
 
@@ -70,7 +70,7 @@ def test_a_rival_that_explains_almost_nothing_does_not_join_a_choice():
     assert fric.reduction == pytest.approx(0.2, abs=0.01) and tors.reduction < 0.005
     assert tors.z_vs_none > Z_AMBIG and fric.z_vs_none > Z_AMBIG
     family = 9                                  # 90028 compared ten single effects
-    assert _paired(tors.test_cluster_ssr, fric.test_cluster_ssr) < worse_z(family)  # old test
+    assert paired_z(tors.test_cluster_ssr, fric.test_cluster_ssr) < worse_z(family)  # old test
     v = verdict([fric, tors], fric, NONE_EVAL, 0.1, family)
     assert v["verdict"] == "named" and v["ambiguous"] == []
     # a rival with a cut of its own (here 8 %, at least half the 10 % bar) still joins

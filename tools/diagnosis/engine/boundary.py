@@ -27,16 +27,16 @@ from __future__ import annotations
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate, paired_z
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, cluster_z, evaluate
 
 
 def at_size(prob, cand, value: float, none_eval, per_cluster: bool = False):
-    """Paired z (positive: better than the unmodified model) of `cand` fixed at `value`
-    (model units), over the held-out clusters of `prob` (none_eval = evaluate(prob, None));
-    per_cluster: that model's per-cluster SSR instead."""
+    """z (the problem's cluster_z; positive: better than the unmodified model) of `cand`
+    fixed at `value` (model units), over the held-out clusters of `prob` (none_eval =
+    evaluate(prob, None)); per_cluster: that model's per-cluster SSR instead."""
     f = Fit((cand,), np.array([float(value)]), np.zeros((1, 2)), np.zeros(1), 0.0)
     _, _, ssr, _ = evaluate(prob, f)
-    return ssr if per_cluster else paired_z(none_eval[2], ssr)
+    return ssr if per_cluster else cluster_z(none_eval[2], ssr, prob.z_stat)
 
 
 def excluded(prob, fit, sides, none_eval, z_excl: float) -> tuple[bool, list]:

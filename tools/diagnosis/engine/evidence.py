@@ -177,13 +177,6 @@ def proposal(between: list, text_change: tuple) -> dict:
     return out
 
 
-def _paired(a: np.ndarray, b: np.ndarray) -> float:
-    """z of sum(a - b) over clusters (positive: b better)."""
-    d = a - b
-    sd = d.std(ddof=1) * np.sqrt(len(d)) if len(d) > 1 else 0.0
-    return float(d.sum() / sd) if sd > 0 else (np.inf if d.sum() > 0 else 0.0)
-
-
 def fit_row(f, none_eval) -> dict:
     """One member of the ambiguous set (f None: the unmodified model)."""
     if f is None:
@@ -211,25 +204,33 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
     and, per competitor of the best, the excitation that would separate them.
 
     The set holds the chosen fit; every single physical effect that clearly beats the
-    unmodified model across clusters (paired z >= Z_AMBIG), cuts its held-out SSR by at
-    least half the reduction a choice of it needs (own_reduction: {effect: bar} where an
-    effect has its own, else min_reduction) and is not clearly worse than the chosen one
-    (paired z < worse_z(family), family: the single effects compared, by default those
-    in fits); and `none` when the chosen fit's gain is not consistent across clusters
-    (z < Z_AMBIG: a few events carry it). With nothing chosen, the singles that pass the
-    first two tests join `none`. The reduction test keeps out a rival that explains
-    almost nothing: when the chosen gain sits in a few events (slips, contacts) the
-    paired z cannot call even a 0.2 % cut worse than a 20 % one (development draw 90028)."""
-    from adaptive_c3.tools.diagnosis.engine.fit import reduction_bar
+    unmodified model across clusters (z_vs_none >= Z_AMBIG, by its problem's statistic:
+    the signed-rank z on Drake's free windows, else the paired z), cuts its held-out SSR
+    by at least half the reduction a choice of it needs (own_reduction: {effect: bar}
+    where an effect has its own, else min_reduction) and is not clearly worse than the
+    chosen one (its loss's paired z < worse_z(family), family: the single effects
+    compared, by default those in fits; where the chosen fit was judged by ranks, both
+    its loss's paired and signed-rank z < worse_z(2 x family), the 5 % shared among both
+    tests: a drag beats rolling resistance in a few fast coasts, where the paired z
+    sees it, rolling resistance beats a drag in many slow ones, where ranks do); and `none`
+    when the chosen fit's gain is not consistent across clusters (z_vs_none < Z_AMBIG: a
+    few events carry it). With nothing chosen, the singles that pass the first two tests
+    join `none`. The reduction test keeps out a rival that explains almost nothing: when
+    the chosen gain sits in a few events (slips, contacts) the paired z cannot call even
+    a 0.2 % cut worse than a 20 % one (development draw 90028)."""
+    from adaptive_c3.tools.diagnosis.engine.fit import cluster_z, reduction_bar
     physical = [f for f in fits if len(f.cands) == 1 and f.physical]
-    z_worse = worse_z(len(physical) - 1 if family is None else family)
+    stats = ("paired",) if chosen is None or chosen.z_stat == "paired" else \
+        ("paired", chosen.z_stat)
+    z_worse = worse_z((len(physical) - 1 if family is None else family) * len(stats))
     singles = [f for f in sorted(physical, key=lambda f: f.score) if f.z_vs_none >= Z_AMBIG
                and f.reduction >= 0.5 * reduction_bar(own_reduction, f, min_reduction)]
     if chosen is None:
         members = [None] + singles if singles else []
     else:
-        members = [chosen] + [f for f in singles if f.cands != chosen.cands and _paired(
-            f.test_cluster_ssr, chosen.test_cluster_ssr) < z_worse]
+        members = [chosen] + [f for f in singles if f.cands != chosen.cands and all(
+            cluster_z(f.test_cluster_ssr, chosen.test_cluster_ssr, st) < z_worse
+            for st in stats)]
         if chosen.z_vs_none < Z_AMBIG:
             members.append(None)
     if len(members) < 2:
@@ -279,12 +280,14 @@ def free_ball_problem(prob):
     """The same fit problem restricted to the windows where the ball rolls or rests
     without the EE (None when fewer than two folds keep such windows). `prob` may have
     longer rollouts than the main problem (diagnose passes FREE_HORIZON): a constant
-    deceleration and one in proportion to speed part over a longer coast."""
+    deceleration and one in proportion to speed part over a longer coast. Its z
+    statistic is the spec's `free_z_stat` (paired unless the spec says otherwise)."""
     from adaptive_c3.tools.diagnosis.engine.fit import Problem
     free = np.isin(window_phases(prob.spec, prob.windows), FREE_PHASES)
     fold = np.where(free, prob.fold, -1)
     sub = Problem(prob.spec, prob.base, prob.windows, fold, prob.weight, prob.cluster_steps,
-                  FREE_MIN_REDUCTION, FREE_MIN_Z)
+                  FREE_MIN_REDUCTION, FREE_MIN_Z,
+                  getattr(prob.spec, "free_z_stat", "paired"))
     return sub if len(sub.folds) >= 2 else None
 
 

@@ -40,11 +40,11 @@ reductions are concentrated in few clusters, e.g. contacts, so it is a poor test
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from itertools import combinations
 
 import numpy as np
-from scipy.stats import t as student_t
+from scipy.stats import rankdata, t as student_t
 
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate, patch, rollout
 from adaptive_c3.tools.diagnosis.engine.locate import LAG, Windows
@@ -63,7 +63,8 @@ class Problem:
     weight: np.ndarray         # [H, n] = 1 / prediction floor
     cluster_steps: int = 50
     min_reduction: float | None = None   # significance: held-out SSR cut (None: the spec's)
-    min_z: float = -np.inf               # ... and paired z against the unmodified model
+    min_z: float = -np.inf               # ... and z against the unmodified model
+    z_stat: str = "paired"               # the cluster statistic of every z (cluster_z)
 
     @property
     def horizon(self) -> int:
@@ -86,8 +87,7 @@ class Problem:
         """The same problem with shorter rollouts (for the horizon-sensitivity check)."""
         W = self.windows
         cut = Windows(W.X0, W.Xt[:, :horizon], W.U[:, :LAG + horizon], W.row, W.episode, W.t0)
-        return Problem(self.spec, self.base, cut, self.fold, self.weight[:horizon],
-                       self.cluster_steps, self.min_reduction, self.min_z)
+        return replace(self, windows=cut, weight=self.weight[:horizon])
 
     def residuals(self, effects, W: Windows) -> np.ndarray:
         """[W, H, n] normalised rollout residuals of the model with `effects` added."""
@@ -115,6 +115,7 @@ class Fit:
     test_window_ssr: np.ndarray = field(default_factory=lambda: np.zeros(0))
     score: float = np.nan
     z_vs_none: float = 0.0
+    z_stat: str = "paired"     # the statistic of z_vs_none (its problem's cluster_z)
     reduction: float = 0.0
     significant: bool = False
     shift: np.ndarray = field(default_factory=lambda: np.zeros(0))
@@ -299,8 +300,7 @@ def widen_for_nuisance(prob: Problem, fit: Fit, user_base: list, kept=()) -> Fit
     if not nuis:
         return fit
     init = np.concatenate([fit.values] + [start.get(c, c.nominal(prob.spec)) for c in nuis])
-    user = Problem(prob.spec, list(user_base), prob.windows, prob.fold, prob.weight,
-                   prob.cluster_steps, prob.min_reduction, prob.min_z)
+    user = replace(prob, base=list(user_base))
     joint = fit_candidates(user, list(fit.cands) + nuis, init=init, ci=False)
     return add_to_interval(fit, joint.values[:fit.num_params] - fit.values)
 
@@ -409,6 +409,31 @@ def paired_z(a: np.ndarray, b: np.ndarray) -> float:
     return float(d.mean() / se) if se > 0 else (np.inf if d.mean() > 0 else 0.0)
 
 
+def signed_rank_z(a: np.ndarray, b: np.ndarray) -> float:
+    """Wilcoxon signed-rank z of the per-cluster SSR reduction from a to b (positive = b
+    better; normal approximation, zero differences dropped, tied ranks averaged). Unlike
+    paired_z it counts how consistently the clusters gain, not how large the mean gain is
+    against their spread: a gain carried by a few long coasts beside many small ones
+    does not cap it, and a few large losses do not sink it."""
+    d = np.asarray(a, float) - np.asarray(b, float)
+    d = d[d != 0.0]
+    n = len(d)
+    if n < 2:
+        return 0.0
+    r = rankdata(np.abs(d))
+    _, ties = np.unique(r, return_counts=True)
+    var = n * (n + 1) * (2 * n + 1) / 24.0 - float(np.sum(ties ** 3 - ties)) / 48.0
+    return float((r[d > 0].sum() - n * (n + 1) / 4.0) / np.sqrt(var)) if var > 0 else 0.0
+
+
+Z_STATS = {"paired": paired_z, "signed_rank": signed_rank_z}
+
+
+def cluster_z(a: np.ndarray, b: np.ndarray, stat: str = "paired") -> float:
+    """z of the per-cluster SSR reduction from a to b by the named statistic (Z_STATS)."""
+    return Z_STATS[stat](a, b)
+
+
 def reduction_bar(by_effect: dict | None, fit: Fit, default: float) -> float:
     """The held-out SSR cut a choice of `fit` needs: by_effect's bar for a single effect
     that has its own (a spec's min_reduction_by_effect), else default."""
@@ -420,7 +445,8 @@ def score_fit(prob: Problem, fit: Fit, none_eval) -> Fit:
     ssr0, n, per0, _ = none_eval
     fit.test_ssr, fit.test_n, fit.test_cluster_ssr, fit.test_window_ssr = evaluate(prob, fit)
     fit.score = _score(fit.test_ssr, n, fit.num_params, prob.horizon)
-    fit.z_vs_none = paired_z(per0, fit.test_cluster_ssr)
+    fit.z_stat = prob.z_stat
+    fit.z_vs_none = cluster_z(per0, fit.test_cluster_ssr, prob.z_stat)
     fit.reduction = 1.0 - fit.test_ssr / ssr0 if ssr0 > 0 else 0.0
     min_red = prob.min_reduction
     if min_red is None:                # per model (see spec), and per effect where it has one

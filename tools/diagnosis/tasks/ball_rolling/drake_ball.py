@@ -99,6 +99,10 @@ class DrakeBallSpec(BallSpec):
     # rigid contacts answer added noise less linearly (0.87-1.41x) and keep the one-step
     # estimate
     calibrated_noise: bool = True
+    # free-window effects are chosen and judged by how consistently the coasts gain
+    # (engine/fit.py signed_rank_z): a drag's gain sits in a few fast coasts, which caps
+    # the paired z (docs/diagnosis.md, "Free-ball effects are judged by ranks")
+    free_z_stat: str = "signed_rank"
     roller: object = None
     rollouts: OrderedDict = field(default_factory=OrderedDict)
 
