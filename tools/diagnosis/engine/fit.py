@@ -34,9 +34,11 @@ of their two effects alone by a further 5% (so a pair wins over a single effect 
 its score is lower by SCORE_MARGIN, and two physical contact offsets win over the
 equally good two-parameter r_comp). Where the spec has calibration nuisances, an r_comp
 with a pair offset inside the calibration tolerance is no choice (that part is
-calibration; the other pair's contact_offset competes on its own). (The paired
-per-cluster z of each fit against the unmodified model is reported, not used: the
-reductions are concentrated in few clusters, e.g. contacts, so it is a poor test.)
+calibration; the other pair's contact_offset competes on its own). The per-cluster z of
+each fit against the unmodified model (the problem's z_stat: paired, or the signed-rank
+z) is reported and used by the verdict (engine/evidence.py); significance requires it
+only where the problem sets min_z (the ball's free windows): reductions concentrated in
+few clusters, e.g. contacts, make it a poor test of a whole recording.
 """
 from __future__ import annotations
 
