@@ -12,13 +12,13 @@ from adaptive_c3.tools.diagnosis.engine.fit import Fit, cluster_z, paired_z, sig
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball import DrakeBallSpec
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import BallSpec
 
-RNG = np.random.default_rng(3)
-NONE = 100 + RNG.normal(0, 1, 40)            # per-cluster held-out SSR of the model as is
+NONE = 100 + np.random.default_rng(3).normal(0, 1, 40)   # per-cluster held-out SSR, as is
 
 
 def test_signed_rank_z_is_wilcoxons_normal_approximation_with_ties_and_zeros():
-    a = np.round(RNG.normal(10, 2, 35), 0)   # rounded: tied differences and zeros
-    b = np.round(RNG.normal(9, 2, 35), 0)
+    rng = np.random.default_rng(10)
+    a = np.round(rng.normal(10, 2, 35), 0)   # rounded: tied differences and zeros
+    b = np.round(rng.normal(9, 2, 35), 0)
     d = a - b
     assert np.any(d == 0) and len(np.unique(np.abs(d))) < len(d)
     p = wilcoxon(d, zero_method="wilcox", correction=False, method="approx").pvalue
@@ -29,12 +29,13 @@ def test_signed_rank_z_is_wilcoxons_normal_approximation_with_ties_and_zeros():
 
 
 def test_a_gain_in_a_few_fast_coasts_passes_on_ranks_not_on_the_paired_z():
-    gain = np.abs(RNG.normal(0.5, 0.3, 40))       # every coast a little better...
+    rng = np.random.default_rng(11)
+    gain = np.abs(rng.normal(0.5, 0.3, 40))       # every coast a little better...
     gain[:4] += 60.0                               # ... and four fast coasts much better
     drag = NONE - gain
     assert paired_z(NONE, drag) < 4.0 < FREE_MIN_Z
     assert signed_rank_z(NONE, drag) > FREE_MIN_Z
-    spurious = NONE - RNG.normal(0.0, 1.0, 40)     # fits noise: gains and losses alike
+    spurious = NONE - rng.normal(0.0, 1.0, 40)     # fits noise: gains and losses alike
     assert abs(signed_rank_z(NONE, spurious)) < 2.0
 
 
@@ -60,8 +61,9 @@ def _judge(chosen_clusters, rival_clusters, stat, family=8):
 def test_a_rival_worse_in_a_few_fast_coasts_is_ruled_out_by_the_paired_z():
     """The rival loses much in the fast coasts and gains a little in the slow ones: its
     loss's paired z calls it worse, its ranks cannot; ruled out on either statistic."""
-    drag = NONE - 10 - np.abs(RNG.normal(0, 0.2, 40))
-    rolling = drag + RNG.normal(-0.15, 0.3, 40)    # the slow coasts: a little better
+    rng = np.random.default_rng(12)
+    drag = NONE - 10 - np.abs(rng.normal(0, 0.2, 40))
+    rolling = drag + rng.normal(-0.15, 0.3, 40)    # the slow coasts: a little better
     rolling[:10] += 8.0                            # the fast coasts: much worse
     assert signed_rank_z(rolling, drag) < worse_z(8) < worse_z(16) < paired_z(rolling, drag)
     assert _judge(drag, rolling, "paired") == []
@@ -71,8 +73,9 @@ def test_a_rival_worse_in_a_few_fast_coasts_is_ruled_out_by_the_paired_z():
 def test_a_rival_worse_in_many_slow_coasts_is_ruled_out_by_ranks_where_they_judge():
     """The rival loses a little in most coasts and gains much in two: its paired z cannot
     call it worse, its ranks can, on a problem judged by ranks (at the shared 5 %)."""
-    chosen = NONE - 10 - np.abs(RNG.normal(0, 0.2, 40))
-    rival = chosen + np.abs(RNG.normal(0.4, 0.2, 40))
+    rng = np.random.default_rng(13)
+    chosen = NONE - 10 - np.abs(rng.normal(0, 0.2, 40))
+    rival = chosen + np.abs(rng.normal(0.4, 0.2, 40))
     rival[:2] -= 15.0
     assert paired_z(rival, chosen) < worse_z(8) < worse_z(16) < signed_rank_z(rival, chosen)
     assert _judge(chosen, rival, "paired") == ["viscous_damping", "rolling_resistance"]
@@ -82,9 +85,10 @@ def test_a_rival_worse_in_many_slow_coasts_is_ruled_out_by_ranks_where_they_judg
 def test_two_tests_share_the_5_percent():
     """Between worse_z(8) and worse_z(16) on both statistics: clearly worse at the
     paired bar alone, not when both tests are run."""
-    chosen = NONE - 10 - np.abs(RNG.normal(0, 0.2, 40))
+    rng = np.random.default_rng(14)
+    chosen = NONE - 10 - np.abs(rng.normal(0, 0.2, 40))
     for scale in np.linspace(0.05, 1.0, 400):
-        rival = chosen + scale + RNG.normal(0, 1.0, 40)
+        rival = chosen + scale + rng.normal(0, 1.0, 40)
         z = (paired_z(rival, chosen), signed_rank_z(rival, chosen))
         if worse_z(8) < min(z) and max(z) < worse_z(16):
             break
