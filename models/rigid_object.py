@@ -26,7 +26,7 @@ from pydrake.geometry import (AddCompliantHydroelasticProperties, AddContactMate
                               ProximityProperties, Sphere)
 from pydrake.math import RigidTransform
 from pydrake.multibody.plant import AddMultibodyPlant, CoulombFriction, MultibodyPlantConfig
-from pydrake.multibody.tree import SpatialInertia, UnitInertia
+from pydrake.multibody.tree import RotationalInertia, SpatialInertia
 from pydrake.systems.framework import DiagramBuilder
 
 from adaptive_c3.systems.contact.anitescu_lcs import AnitescuLinearizer, ContactPair
@@ -43,10 +43,11 @@ class RigidObjectParams:
     """Everything that shapes the plant (the scenario's body, contact and patch)."""
     half_size: tuple            # m, half-widths along body x, y, z (patched)
     mass: float                 # kg (patched)
-    inertia_diag: tuple         # kg m^2 about the centre, body frame (patched)
+    inertia_diag: tuple         # kg m^2 about the centre of mass, body axes (patched)
     table_height: float         # m (patched)
     friction: float
     corner_radius: float        # m
+    com_offset: tuple = (0.0, 0.0, 0.0)   # m, centre of mass from the box's centre, body frame
 
     @classmethod
     def from_scenario(cls, s) -> "RigidObjectParams":
@@ -62,7 +63,7 @@ class RigidObjectParams:
         return cls(tuple(float(h) for h in half), float(mass),
                    tuple(float(i) for i in inertia * p.inertia_scale),
                    float(c.table_height + p.table_offset), float(c.friction),
-                   float(c.corner_radius))
+                   float(c.corner_radius), tuple(float(v) for v in p.com_offset))
 
     @property
     def size(self) -> float:
@@ -119,8 +120,9 @@ def build_rigid_object_plant(params: RigidObjectParams, time_step: float = 0.0,
     if hydro:
         AddRigidHydroelasticProperties(table_props)
 
-    unit = UnitInertia(*(np.asarray(params.inertia_diag) / params.mass))
-    body = plant.AddRigidBody(BODY_NAME, SpatialInertia(params.mass, np.zeros(3), unit))
+    body = plant.AddRigidBody(BODY_NAME, SpatialInertia.MakeFromCentralInertia(
+        params.mass, np.asarray(params.com_offset, float),
+        RotationalInertia(*params.inertia_diag)))
     r = params.corner_radius
     pairs = []
     table = plant.RegisterCollisionGeometry(

@@ -42,6 +42,9 @@ class ModelPatch:
     mass_scale: float = 1.0          # scales mass and inertia together
     inertia_scale: float = 1.0       # scales the inertia only
     r_comp: List[float] = dc.field(default_factory=list)  # additive complementarity residual
+    # m, the centre of mass from the box's centre, body frame (an uneven shell, a weight on
+    # one face); the recorded position stays the box's centre
+    com_offset: List[float] = dc.field(default_factory=lambda: [0.0, 0.0, 0.0])
 
 
 @dc.dataclass
@@ -108,6 +111,9 @@ def validate_rigid_object(s: RigidObjectScenario) -> None:
         v = getattr(p, key)
         need(finite(v) and v > 0, f"patch.{key} must be > 0, got {v}")
     need(all(finite(v) for v in p.r_comp), "patch.r_comp must be finite")
+    need(len(p.com_offset) == 3 and all(finite(v) and abs(v) < min(b.box_size) / 2
+                                        for v in p.com_offset),
+         f"patch.com_offset must be 3 values (m) inside the box, got {p.com_offset}")
     need(finite(d.time_step) and d.time_step >= 0, f"drake.time_step must be >= 0, got {d.time_step}")
     need(finite(d.point_stiffness) and d.point_stiffness >= 0, "drake.point_stiffness must be >= 0")
     need(finite(d.relaxation_time) and d.relaxation_time >= 0, "drake.relaxation_time must be >= 0")

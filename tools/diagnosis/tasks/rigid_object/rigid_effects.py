@@ -75,6 +75,12 @@ DRAKE_EFFECTS = (
     RigidEffect("table_offset", "patch.table_offset", (-3e-3, -2e-3, -1e-3, 0.0, 1e-3, 2e-3),
                 "m", "the table top is not where the simulation puts it (calibration)",
                 kind="nuisance", lcs="patch.table_offset"),
+    *(RigidEffect(f"com_offset_{axis}", f"patch.com_offset[{i}]",
+                  (-9e-3, -6e-3, -3e-3, 0.0, 3e-3, 6e-3, 9e-3, 1.2e-2), "m",
+                  f"the centre of mass is off the box's centre along body {axis} (an uneven "
+                  "shell, a weight on one face: the object lands on that face more often; "
+                  "friction re-fitted with it)", lcs=f"patch.com_offset[{i}]",
+                  refit="drake.friction") for i, axis in enumerate("xyz")),
     RigidEffect("size_offset", "patch.size_offset", (-2e-3, -1e-3, 0.0, 1e-3, 2e-3),
                 "m", "the object's contact geometry is larger or smaller than modelled",
                 lcs="patch.size_offset"),
