@@ -160,7 +160,10 @@ def set_key(container, key: str, value, as_dict: bool = False) -> None:
         sec = container.setdefault(section, {})
         if index is None:
             sec[field] = key_value(f"{section}.{field}", value)
-        else:
+        else:         # a list the YAML leaves out starts as the schema's default
+            if field not in sec:
+                from adaptive_c3.scenarios.rigid_object_schema import RigidObjectScenario
+                sec[field] = list(getattr(getattr(RigidObjectScenario(), section), field))
             sec[field][index] = float(value)
         return
     sec = getattr(container, section)

@@ -86,10 +86,7 @@ def plain_summary(result: dict) -> str:
 def patched_scenario_text(scenario_text: str, chosen: dict) -> str:
     data = yaml.safe_load(scenario_text) or {}
     from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_effects import set_key
-    from adaptive_c3.scenarios.rigid_object_schema import DrakeBaseline
     for key, value in chosen.items():
-        if key.startswith("drake.external_force[") and "external_force" not in data.get("drake", {}):
-            data.setdefault("drake", {})["external_force"] = list(DrakeBaseline().external_force)
         set_key(data, key, value, as_dict=True)
     notes = ", ".join(f"{k} = {v:.4g}" for k, v in chosen.items()) or "no effect selected"
     return ("# written by adaptive-c3 diagnose: " + notes + "\n"
