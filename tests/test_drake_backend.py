@@ -114,14 +114,18 @@ def test_drake_diagnosis_finds_concealed_friction_and_its_patch_runs(tmp_path, c
 
 
 def test_patched_external_force_key_runs(tmp_path):
-    """An indexed key (drake.external_force[2]) lands in the patched YAML as a full list."""
+    """Indexed keys (drake.external_force[2], patch.com_offset[2]) land in the patched YAML
+    as full lists, starting from the schema's default where the file has none."""
     from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_report import patched_scenario_text
+    assert "com_offset" not in CUBE.read_text()
     text = patched_scenario_text(CUBE.read_text(), {"drake.external_force[2]": 0.1,
-                                                    "drake.viscous_drag": 0.05})
+                                                    "drake.viscous_drag": 0.05,
+                                                    "patch.com_offset[2]": 0.0077})
     (tmp_path / "p.yaml").write_text(text)
     patched, _ = load_scenario(tmp_path / "p.yaml")
     assert patched.drake.external_force == [0.0, 0.0, 0.1]
     assert patched.drake.viscous_drag == 0.05
+    assert patched.patch.com_offset == [0.0, 0.0, 0.0077]
 
 
 @pytest.fixture(scope="module")

@@ -62,17 +62,3 @@ def test_drakes_library_tries_the_offset_along_each_body_axis_with_friction_refi
         assert e.key == f"patch.com_offset[{i}]" and e.refit == "drake.friction"
         assert min(e.grid) < 0 < max(e.grid) and 0.0 in e.grid
 
-
-def test_a_patched_offset_lands_in_the_yaml_and_loads(tmp_path):
-    """An indexed key whose list the scenario file leaves out starts from the schema's
-    default (cube_toss.yaml has no patch.com_offset)."""
-    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
-    from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_report import patched_scenario_text
-    cube = SCENARIO_DIR / "cube_toss.yaml"
-    assert "com_offset" not in cube.read_text()
-    text = patched_scenario_text(cube.read_text(), {"patch.com_offset[2]": 0.0077,
-                                                    "drake.friction": 0.1746})
-    (tmp_path / "p.yaml").write_text(text)
-    patched, _ = load_scenario(tmp_path / "p.yaml")
-    assert patched.patch.com_offset == [0.0, 0.0, 0.0077]
-    assert patched.drake.friction == 0.1746
