@@ -61,4 +61,3 @@ def test_drakes_library_tries_the_offset_along_each_body_axis_with_friction_refi
         e = effects[f"com_offset_{axis}"]
         assert e.key == f"patch.com_offset[{i}]" and e.refit == "drake.friction"
         assert min(e.grid) < 0 < max(e.grid) and 0.0 in e.grid
-
