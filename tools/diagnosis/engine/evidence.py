@@ -17,6 +17,8 @@ clearly beats the unmodified model (paired z >= Z_AMBIG).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 Z_AMBIG = 2.0
@@ -283,12 +285,9 @@ def free_ball_problem(prob):
     longer rollouts than the main problem (diagnose passes FREE_HORIZON): a constant
     deceleration and one in proportion to speed part over a longer coast. Its z
     statistic is the spec's `free_z_stat` (paired unless the spec says otherwise)."""
-    from adaptive_c3.tools.diagnosis.engine.fit import Problem
     free = np.isin(window_phases(prob.spec, prob.windows), FREE_PHASES)
-    fold = np.where(free, prob.fold, -1)
-    sub = Problem(prob.spec, prob.base, prob.windows, fold, prob.weight, prob.cluster_steps,
-                  FREE_MIN_REDUCTION, FREE_MIN_Z,
-                  getattr(prob.spec, "free_z_stat", "paired"))
+    sub = replace(prob, fold=np.where(free, prob.fold, -1), min_reduction=FREE_MIN_REDUCTION,
+                  min_z=FREE_MIN_Z, z_stat=getattr(prob.spec, "free_z_stat", "paired"))
     return sub if len(sub.folds) >= 2 else None
 
 
