@@ -145,3 +145,38 @@ def test_a_stuck_fit_on_clean_data_is_still_ruled_out_at_size():
     not_excluded(judged, spec, [stuck], none_eval, prob=prob)
     assert judged["verdict"] == "none" and judged["ambiguous"] == []
     assert judged["size_tests"][0]["excluded"] is True
+
+
+class ScaledSlipProblem(SlipProblem):
+    """SlipProblem with the slip's error scaled by `gain` (a weaker slip signal)."""
+
+    def __init__(self, spec, truth_mu: float, gain: float):
+        super().__init__(spec, truth_mu)
+        self.gain = gain
+
+    def residuals(self, effects, W):
+        base = self.noise[W.row // 10]
+        return base + self.gain * (super().residuals(effects, W) - base)
+
+
+def test_the_size_bar_is_one_test_per_effect():
+    """A `none` is wrong only when the one effect present was excluded, so each effect's
+    size test runs at 5 % alone (evidence.size_z, Z_AMBIG): mu 0.5 scoring a z between
+    2.0 and the Bonferroni bar over the sized effects is excluded however many other sized
+    effects were fitted (the old bar, worse_z over them, kept it in the set)."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import Z_AMBIG, size_z, worse_z
+    spec = _spec()
+    prob = ScaledSlipProblem(spec, truth_mu=1.0, gain=0.028)
+    fric, none_eval = _fric_fit(prob, 0.9, [0.2, 1.6])
+    z = at_size(prob, FRICTION, 0.5, none_eval)
+    others = [Fit((Candidate(name, target),), np.array([v]), np.array([[v, v]]),
+                  np.zeros(1), 0.0) for name, target, v in (
+                      ("viscous_damping", "ball", 0.0), ("rolling_resistance", "ball_table", 0.0),
+                      ("external_force", "ball_x", 0.0), ("external_force", "ball_y", 0.0),
+                      ("contact_offset", "ee_ball", 0.0), ("mass_scale", "ball", 1.0))]
+    assert size_z() == Z_AMBIG
+    assert -worse_z(1 + len(others)) < z < -size_z()        # between the two bars
+    judged = verdict([fric], None, none_eval, 0.1)
+    not_excluded(judged, spec, [fric] + others, none_eval, prob=prob)
+    assert judged["verdict"] == "none" and judged["ambiguous"] == []
+    assert judged["size_tests"][0]["excluded"] is True

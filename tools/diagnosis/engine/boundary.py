@@ -15,8 +15,8 @@ with the unmodified model cluster by cluster (the paired z the verdict uses). Th
 is excluded when it is clearly worse, z <= -z_excl, on every side the interval reaches,
 and the fit's own value, where it lies beyond that size, is not better than `none` (a
 cost that is not monotone in the effect keeps the interval's answer). Nothing is fitted
-at the tested value, so all held-out windows are used once. z_excl is the rival rule's
-(evidence.worse_z over the effects with a size that matters).
+at the tested value, so all held-out windows are used once. z_excl is evidence.size_z:
+one test per effect at 5 %, not shared among the effects as the rival rule's bar is.
 
 On development draw 90009 (clean) mu 0.5 scored z -0.82 and drag 0.1 z -1.29 on one
 recording, mu 0.5 z -0.29 after the follow-up, so neither was excluded and the verdict
