@@ -65,6 +65,7 @@ BOOTSTRAP = 2000
 TRIM = 0.2               # fraction of episodes cut at each end by the fit objective
 FINE_POINTS = 4          # values added between the coarse grid's best point's neighbours
 REFIT_FACTORS = (0.94, 0.97, 1.0, 1.03)   # a two-parameter effect's refit key, x its value
+MAX_EXTEND = 3           # grid steps an effect may grow past each end (RigidEffect.extend)
 DEFAULT_FIT_EPISODES = {"lcs": 30, "drake": 60}   # diagnose's --fit-episodes (a Drake
                          # rollout costs ~1/30 of an LCS one; 60 cube tosses: 348 s on 2 cores)
 PAIRED_FIT = ("drake",)  # backends fitted by the paired objective (see objective): Drake's
@@ -135,6 +136,37 @@ def profile_scores(score, base, eff, values, ref=None) -> tuple[np.ndarray, list
     pick = np.argmin(objective(S, ref), axis=1)
     return (S[np.arange(len(values)), pick],
             [{eff.refit: float(companions[k])} for k in pick])
+
+
+def extend_grid(eff, grid, S: np.ndarray, with_: list, score_values, ref=None):
+    """(grid, S, with_) grown past an end while the effect's bootstrap interval reaches it:
+    an interval clipped by the grid says nothing about the values beyond (the real cube's
+    centre-of-mass offset read [6.1, 12.0] mm on a grid ending at 12 mm). One more value a
+    grid step past that end, inside eff.extend, is scored (score_values(values) -> (S rows,
+    with_ dicts), as profile_scores) at most MAX_EXTEND times a side. The check draws its
+    own fixed-seed resamples, so a grid that needs no growth leaves every later draw as
+    it was."""
+    if not eff.extend or eff.integer:
+        return grid, S, with_
+    grid, with_ = list(grid), list(with_)
+    grown = {-1: 0, 1: 0}
+    while True:
+        lo, hi = bootstrap_interval(grid, S, np.random.default_rng(0), False, ref)
+        wanted = []
+        for side, end, step, reach in ((-1, grid[0], grid[1] - grid[0], lo <= grid[0]),
+                                       (1, grid[-1], grid[-1] - grid[-2], hi >= grid[-1])):
+            value = end + side * step
+            if reach and grown[side] < MAX_EXTEND and eff.extend[0] <= value <= eff.extend[1]:
+                wanted.append((side, float(value)))
+        if not wanted:
+            return grid, S, with_
+        S_new, with_new = score_values([v for _, v in wanted])
+        for (side, value), row, w in zip(wanted, S_new, with_new):
+            grown[side] += 1
+            if side < 0:
+                grid, S, with_ = [value] + grid, np.vstack([row[None], S]), [w] + with_
+            else:
+                grid, S, with_ = grid + [value], np.vstack([S, row[None]]), with_ + [w]
 
 
 def bootstrap_interval(grid, S: np.ndarray, rng, integer: bool = False,
@@ -246,6 +278,8 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
                 per = len(REFIT_FACTORS) if eff.refit else 1     # rollouts of a value
                 S, with_ = profile_scores(fit_score, base, eff, grid, ref)
                 tick(len(grid) * per)
+                grid, S, with_ = extend_grid(eff, grid, S, with_, lambda vs: profile_scores(
+                    fit_score, base, eff, vs, ref), ref)
                 if not eff.integer and not eff.refit:   # coarse to fine: FINE_POINTS between
                     grid, S = _refine_grid(grid, S, lambda vs: fit_score(   # the best's neighbours
                         [with_values(base, {eff.key: v}) for v in vs]), ref)

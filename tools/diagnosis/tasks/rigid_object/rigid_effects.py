@@ -28,6 +28,8 @@ class RigidEffect:
     kind: str = "physics"          # or "nuisance"
     lcs: str = ""                  # drake effects: the LCS key, or "no LCS counterpart: why"
     refit: str = ""                # a second key re-fitted with it (a two-parameter effect)
+    extend: tuple = ()             # (low, high): how far the grid may grow past its ends
+                                   # while the interval reaches one (rigid_diagnose.extend_grid)
 
 
 EFFECTS = (
@@ -80,7 +82,7 @@ DRAKE_EFFECTS = (
                   f"the centre of mass is off the box's centre along body {axis} (an uneven "
                   "shell, a weight on one face: the object lands on that face more often; "
                   "friction re-fitted with it)", lcs=f"patch.com_offset[{i}]",
-                  refit="drake.friction") for i, axis in enumerate("xyz")),
+                  refit="drake.friction", extend=(-0.03, 0.03)) for i, axis in enumerate("xyz")),
     RigidEffect("size_offset", "patch.size_offset", (-2e-3, -1e-3, 0.0, 1e-3, 2e-3),
                 "m", "the object's contact geometry is larger or smaller than modelled",
                 lcs="patch.size_offset"),
