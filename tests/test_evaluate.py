@@ -96,6 +96,35 @@ def test_evaluate_writes_the_summary_and_figure(tmp_path, capsys):
     assert (tmp_path / "out" / "evaluate.png").stat().st_size > 10_000
 
 
+def test_an_episode_the_model_cannot_roll_out_is_scored_not_fatal(tmp_path, capsys,
+                                                                   monkeypatch):
+    """A rollout that fails (the LCS's LCP has no solution: the real tosses' 16-edge LCS on 2
+    of 117 held-out tosses) is scored as the diagnosis scores it (FAILED_SCORE) and listed,
+    and the other episodes are still evaluated."""
+    from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE
+    from adaptive_c3.tools.diagnosis.backends.rigid_model import RigidModelError
+    rollout = RigidObjectModel.rollout
+
+    def failing(self, x0, steps, *a, **kw):
+        if x0[2] > 0.07:                       # the second, higher episode
+            raise RigidModelError("the model's LCP has no solution (iteration cap)")
+        return rollout(self, x0, steps, *a, **kw)
+
+    monkeypatch.setattr(RigidObjectModel, "rollout", failing)
+    x, t, ep = _drop_episodes()
+    path = _recording(tmp_path, x, t, ep)
+    assert cli.main(["evaluate", str(path), "--scenario", str(CUBE), "--workers", "1",
+                     "--initial-state", "first-row", "--out", str(tmp_path / "out")]) == 0
+    out = capsys.readouterr().out
+    assert "1 episodes failed to roll out" in out and "scored 500 %" in out
+    res = json.loads((tmp_path / "out" / "evaluate.json").read_text())
+    rows = res["per_episode"]["model"]
+    assert [r.get("failed", False) for r in rows] == [False, True]
+    assert rows[1]["position_pct_mean"] == FAILED_SCORE
+    assert rows[0]["position_pct_mean"] < 100.0
+    assert res["summary"]["model"]["failed"] == 1
+
+
 @pytest.mark.parametrize("case, message", [
     ("names", "do not match"),
     ("one_row", "at least 2"),

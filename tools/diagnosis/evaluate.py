@@ -13,6 +13,9 @@ every model compared, and compared with the recording sample by sample:
   orientation_deg_mean / _final  the angle of the rotation between the two orientations
 Each is summarised over episodes as median, mean and 90th percentile
 (`summary.model.<metric>_median`, `_mean`, `_p90`; `model` names the backend).
+An episode the model cannot roll out (an LCP without a solution, a state gone
+non-finite) is scored FAILED_SCORE % and 180 deg, as the diagnosis scores it, marked
+`failed` in `per_episode`, counted in `summary.<name>.failed` and listed on the console.
 `--baseline lcs|drake` adds the other backend under `summary.<name>`. Rollouts run on
 `--workers` processes. Writes DIR/evaluate.json and DIR/evaluate.png.
 
@@ -69,10 +72,8 @@ def evaluate(rec, scenario, baselines=(), episode_ids=None, progress: bool = Tru
             scorer.close()
         rows = []
         for e, x, x_hat in zip(ids, xs, x_hats):
-            if x_hat is None:
-                raise UserError(f"the {name} model failed to roll out episode {e}")
             rows.append({"episode": e, **episode_errors(x_hat, x, size)})
-            if e in shown:
+            if e in shown and x_hat is not None:
                 result["rollouts"].setdefault(str(e), {"t": episodes[e][0].tolist(),
                                                        "data": x[:, :7].tolist()})
                 result["rollouts"][str(e)][tag] = x_hat[:, :7].tolist()
@@ -142,7 +143,7 @@ def cmd_evaluate(args) -> int:
     from adaptive_c3.tools.user_input import resolve_scenario_path
     scenario, _ = load_scenario(resolve_scenario_path(args.scenario), list(args.set or []))
     rec = load_recording(args.recording)
-    from adaptive_c3.tools.diagnosis.backends.model_backend import check_model
+    from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE, check_model
     model = check_model(getattr(args, "model", None) or "lcs")
     baselines = [check_model(args.baseline)] if args.baseline else []
     workers = int(getattr(args, "workers", None) or 2)
@@ -162,5 +163,11 @@ def cmd_evaluate(args) -> int:
                      for n, s in result["summary"].items())
     print(f"{len(result['episodes'])} episodes, model {result['model']}, start "
           f"{result['initial_state']} - {line}")
+    for n, rows in result["per_episode"].items():
+        failed = [r["episode"] for r in rows if r.get("failed")]
+        if failed:
+            print(f"{n}: {len(failed)} episodes failed to roll out (the model's LCP had no "
+                  f"solution or the state went non-finite), scored {FAILED_SCORE:.0f} % of "
+                  f"size as the diagnosis scores them: {', '.join(map(str, failed))}")
     print(f"results in {out}: evaluate.json, evaluate.png")
     return 0

@@ -218,8 +218,14 @@ def recording_episodes(rec, episode_ids=None) -> tuple[dict, float]:
     return {e: (rec.t[idx], rec.x[idx]) for e, idx in episodes.items()}, dt
 
 
-def episode_errors(x_model: np.ndarray, x_data: np.ndarray, size: float) -> dict:
-    """The per-episode metrics of METRICS for two [T, 13] recording-layout arrays."""
+def episode_errors(x_model: np.ndarray | None, x_data: np.ndarray, size: float) -> dict:
+    """The per-episode metrics of METRICS for two [T, 13] recording-layout arrays. A model
+    rollout that failed (x_model None: its LCP had no solution, or it went non-finite)
+    scores FAILED_SCORE % and 180 deg, as the fit scores it, and is marked `failed`."""
+    if x_model is None:
+        from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE
+        return {"position_pct_mean": FAILED_SCORE, "position_pct_final": FAILED_SCORE,
+                "orientation_deg_mean": 180.0, "orientation_deg_final": 180.0, "failed": True}
     pos = np.linalg.norm(x_model[:, 0:3] - x_data[:, 0:3], axis=1) / size * 100.0
     ori = orientation_error_deg(x_model[:, 3:7], x_data[:, 3:7])
     return {"position_pct_mean": float(pos.mean()), "position_pct_final": float(pos[-1]),
@@ -227,7 +233,8 @@ def episode_errors(x_model: np.ndarray, x_data: np.ndarray, size: float) -> dict
 
 
 def summarise(per_episode: list[dict]) -> dict:
-    out = {"episodes": len(per_episode)}
+    out = {"episodes": len(per_episode),
+           "failed": sum(bool(e.get("failed")) for e in per_episode)}
     for key in METRICS:
         v = np.array([e[key] for e in per_episode])
         out[f"{key}_median"] = float(np.median(v))

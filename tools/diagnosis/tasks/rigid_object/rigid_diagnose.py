@@ -366,13 +366,8 @@ def held_out_runs(runs, ids, episodes: dict, x0s: dict, dt: float, size: float,
         rows = []
         for e, x_hat in zip(ids, x_hats):
             x = episodes[e][1]
-            if x_hat is None:     # a failed rollout scores like the fit's failures
-                rows.append({"episode": e, "position_pct_mean": FAILED_SCORE,
-                             "position_pct_final": FAILED_SCORE, "orientation_deg_mean": 180.0,
-                             "orientation_deg_final": 180.0})
-                continue
             rows.append({"episode": e, **episode_errors(x_hat, x, size)})
-            if e in shown:
+            if e in shown and x_hat is not None:
                 rollouts.setdefault(e, {"t": episodes[e][0], "data": x})[tag] = x_hat
         held[tag] = dict(summary=summarise(rows), per_episode=rows)
     return held, rollouts
