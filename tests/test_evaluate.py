@@ -123,6 +123,12 @@ def test_an_episode_the_model_cannot_roll_out_is_scored_not_fatal(tmp_path, caps
     assert rows[1]["position_pct_mean"] == FAILED_SCORE
     assert rows[0]["position_pct_mean"] < 100.0
     assert res["summary"]["model"]["failed"] == 1
+    monkeypatch.setattr(RigidObjectModel, "rollout", lambda *a, **kw: (_ for _ in ()).throw(
+        RigidModelError("no solution")))
+    assert cli.main(["evaluate", str(path), "--scenario", str(CUBE), "--workers", "1",
+                     "--out", str(tmp_path / "out2")]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "failed to roll out every episode" in err
 
 
 @pytest.mark.parametrize("case, message", [

@@ -15,7 +15,8 @@ Each is summarised over episodes as median, mean and 90th percentile
 (`summary.model.<metric>_median`, `_mean`, `_p90`; `model` names the backend).
 An episode the model cannot roll out (an LCP without a solution, a state gone
 non-finite) is scored FAILED_SCORE % and 180 deg, as the diagnosis scores it, marked
-`failed` in `per_episode`, counted in `summary.<name>.failed` and listed on the console.
+`failed` in `per_episode`, counted in `summary.<name>.failed` and listed on the console;
+a model that rolls out no episode at all is a one-line error (exit 2).
 `--baseline lcs|drake` adds the other backend under `summary.<name>`. Rollouts run on
 `--workers` processes. Writes DIR/evaluate.json and DIR/evaluate.png.
 
@@ -71,6 +72,9 @@ def evaluate(rec, scenario, baselines=(), episode_ids=None, progress: bool = Tru
             bar.close()
             scorer.close()
         rows = []
+        if all(x_hat is None for x_hat in x_hats):
+            raise UserError(f"the {name} model failed to roll out every episode (its LCP "
+                            f"had no solution or the state went non-finite)")
         for e, x, x_hat in zip(ids, xs, x_hats):
             rows.append({"episode": e, **episode_errors(x_hat, x, size)})
             if e in shown and x_hat is not None:

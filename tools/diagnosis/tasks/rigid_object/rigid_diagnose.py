@@ -278,8 +278,11 @@ def diagnose_rigid(rec, scenario, held_out_fraction: float = 0.3, max_fit_episod
                 per = len(REFIT_FACTORS) if eff.refit else 1     # rollouts of a value
                 S, with_ = profile_scores(fit_score, base, eff, grid, ref)
                 tick(len(grid) * per)
-                grid, S, with_ = extend_grid(eff, grid, S, with_, lambda vs: profile_scores(
-                    fit_score, base, eff, vs, ref), ref)
+
+                def more(values):           # values past the grid's end (called right here)
+                    tick(len(values) * per)
+                    return profile_scores(fit_score, base, eff, values, ref)
+                grid, S, with_ = extend_grid(eff, grid, S, with_, more, ref)
                 if not eff.integer and not eff.refit:   # coarse to fine: FINE_POINTS between
                     grid, S = _refine_grid(grid, S, lambda vs: fit_score(   # the best's neighbours
                         [with_values(base, {eff.key: v}) for v in vs]), ref)
