@@ -13,6 +13,7 @@ from scipy.spatial import cKDTree
 
 from adaptive_c3.models.rigid_object import (RECORDING_STATE_NAMES, orientation_error_deg,
                                              quat_to_matrix)
+from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE
 from adaptive_c3.tools.user_input import UserError
 
 _NAMES = ("x", "y", "z", "qw", "qx", "qy", "qz", "vx", "vy", "vz", "wx", "wy", "wz")
@@ -223,7 +224,6 @@ def episode_errors(x_model: np.ndarray | None, x_data: np.ndarray, size: float) 
     rollout that failed (x_model None: its LCP had no solution, or it went non-finite)
     scores FAILED_SCORE % and 180 deg, as the fit scores it, and is marked `failed`."""
     if x_model is None:
-        from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE
         return {"position_pct_mean": FAILED_SCORE, "position_pct_final": FAILED_SCORE,
                 "orientation_deg_mean": 180.0, "orientation_deg_final": 180.0, "failed": True}
     pos = np.linalg.norm(x_model[:, 0:3] - x_data[:, 0:3], axis=1) / size * 100.0
