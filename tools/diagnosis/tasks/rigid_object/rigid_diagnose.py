@@ -50,12 +50,12 @@ from adaptive_c3.models.rigid_object import RigidObjectParams
 from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import find_twins, split_episodes, twin_groups
 from adaptive_c3.tools.diagnosis.tasks.rigid_object.episodes import (episode_errors, recording_episodes,
                                                   summarise)
-from adaptive_c3.tools.diagnosis.backends.model_backend import FAILED_SCORE, Scorer, check_model
+from adaptive_c3.tools.diagnosis.backends.model_backend import Scorer, check_model
 from adaptive_c3.tools.diagnosis.tasks.rigid_object.rigid_effects import (EFFECTS, current_value, library,
                                                        not_identifiable, with_values)
 from adaptive_c3.tools.progress import Progress
 
-__all__ = ["EFFECTS", "FAILED_SCORE", "diagnose_rigid", "with_values", "refine_minimum",
+__all__ = ["EFFECTS", "diagnose_rigid", "with_values", "refine_minimum",
            "bootstrap_interval", "paired_gain"]
 
 MAX_EFFECTS = 3
