@@ -31,8 +31,9 @@ from adaptive_c3.models.ball_rolling_controller_model import (BALL_VEL, STATE_NA
                                                               default_state,
                                                               ee_input_from_motion)
 from adaptive_c3.diagrams.ball_rolling_camera import add_ball_camera
-from adaptive_c3.diagrams.ball_rolling_world import (ball_start_xy, make_gait, start_states,
-                                                     true_mass, true_radius, true_world)
+from adaptive_c3.diagrams.ball_rolling_world import (apply_true_ee_friction, ball_start_xy,
+                                                     make_gait, start_states, true_mass,
+                                                     true_radius, true_world)
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
 from adaptive_c3.systems.contact.anitescu_lcs import OPEN_PAIR_TOL
 from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
@@ -302,6 +303,7 @@ def build_ball_rolling_diagram(s: BallRollingScenario, meshcat=None) -> BallRoll
     x_start, ee_start = start_states(s)
     scene, ee_instance = true_world(s)(plant)
     plant.Finalize()
+    apply_true_ee_friction(plant, scene_graph, s, scene.panda, ee_instance)
     if s.model.object != "ball":      # a fruit: rigid hydroelastic contact
         from adaptive_c3.models.fruit import make_rigid_hydroelastic
         make_rigid_hydroelastic(plant, scene_graph)

@@ -9,7 +9,8 @@ import math
 import numpy as np
 
 from adaptive_c3.models.ball_rolling_controller_model import default_state
-from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene, add_point_ee
+from adaptive_c3.models.ball_rolling_scene import (EE_TIP_FRAME, add_ball_rolling_scene,
+                                                   add_point_ee, set_body_friction)
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
 from adaptive_c3.systems.rolling.gait import CirclePath, GaitSettings, RollingGait
 
@@ -71,3 +72,25 @@ def true_world(s: BallRollingScenario):
                               position=ee_start, mu=m.true_friction)
         return scene, ee
     return add
+
+
+def ee_geometry_friction(pair_mu: float, ball_mu: float) -> float:
+    """The EE geometry's mu that makes Drake's combined EE-ball mu (2 a b / (a + b)) equal
+    pair_mu with the ball's geometry at ball_mu (needs pair_mu < 2 ball_mu)."""
+    return pair_mu * ball_mu / (2.0 * ball_mu - pair_mu)
+
+
+def apply_true_ee_friction(plant, scene_graph, s: BallRollingScenario, panda=None,
+                           ee_instance=None) -> None:
+    """Gives the truth's EE-ball pair the friction model.true_ee_friction (when >= 0) by
+    setting the EE tip's geometry friction; the ball and table keep true_friction, so the
+    ball-table pair is unchanged. Call after Finalize, before a context is created."""
+    m = s.model
+    if m.true_ee_friction < 0:
+        return
+    if panda is not None:
+        tip = plant.GetBodyByName(EE_TIP_FRAME, panda)
+    else:
+        tip = plant.GetBodyByName(plant.GetModelInstanceName(ee_instance), ee_instance)
+    set_body_friction(plant, scene_graph, tip,
+                      ee_geometry_friction(m.true_ee_friction, m.true_friction))

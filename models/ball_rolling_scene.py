@@ -14,7 +14,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from pydrake.geometry import Box, HalfSpace, Sphere
+from pydrake.geometry import Box, HalfSpace, ProximityProperties, RoleAssign, Sphere
 from pydrake.math import RigidTransform
 from pydrake.multibody.parsing import Parser
 from pydrake.multibody.plant import CoulombFriction, MultibodyPlant
@@ -131,6 +131,17 @@ def add_ball_rolling_scene(plant: MultibodyPlant, *, ball_radius: float = BALL_R
     plant.SetDefaultFloatingBaseBodyPose(body, RigidTransform(
         [ball_position[0], ball_position[1], table_top_z + ball_radius]))
     return BallRollingScene(panda, ball, ball_radius, table_top_z)
+
+
+def set_body_friction(plant: MultibodyPlant, scene_graph, body, mu: float) -> None:
+    """Replaces the Coulomb friction (static = dynamic = mu) of every collision geometry
+    of `body`, keeping the rest of its proximity properties. Call after Finalize and
+    before a context is created."""
+    inspector = scene_graph.model_inspector()
+    for gid in plant.GetCollisionGeometriesForBody(body):
+        props = ProximityProperties(inspector.GetProximityProperties(gid))
+        props.UpdateProperty("material", "coulomb_friction", CoulombFriction(mu, mu))
+        scene_graph.AssignRole(plant.get_source_id(), gid, props, RoleAssign.kReplace)
 
 
 def add_point_ee(plant: MultibodyPlant, *, radius: float = 0.0195, mass: float = 1.0,

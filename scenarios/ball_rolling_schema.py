@@ -24,6 +24,8 @@ class RollingModel:
                                      # apparent mass at the tip; the reference uses 0.01)
     friction: float = 1.0            # mu of the model's contacts
     true_friction: float = 1.0       # mu of the simulated truth (every geometry)
+    true_ee_friction: float = -1.0   # mu of the truth's EE-ball pair alone (< 0: what
+                                     # Drake combines from the EE's 1 and true_friction)
     friction_edges: int = 4          # n_e per contact
     eps_c: float = 0.01              # Anitescu regulariser
     planning_dt: float = 0.1         # LCS step, s
@@ -207,6 +209,10 @@ def validate_ball_rolling(s: BallRollingScenario) -> None:
          f"model.radius_error must be smaller than half the radius, got {m.radius_error}")
     need(math.isfinite(m.learner_dt) and 0 <= m.learner_dt <= m.planning_dt,
          f"model.learner_dt must be in [0, planning_dt], got {m.learner_dt}")
+    need(math.isfinite(m.true_ee_friction) and (m.true_ee_friction < 0
+                                                or 0 < m.true_ee_friction < 2 * m.true_friction),
+         "model.true_ee_friction must be < 0 (off) or in (0, 2 x model.true_friction) "
+         f"(Drake combines a pair's coefficients), got {m.true_ee_friction}")
     need(m.learner_input in ("applied", "motion"), f"model.learner_input must be applied or motion, got '{m.learner_input}'")
     need(m.friction_edges in (4, 8), f"model.friction_edges must be 4 or 8, got {m.friction_edges}")
     need(len(s.target.center) == 2 and all(math.isfinite(v) for v in s.target.center),

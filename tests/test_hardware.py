@@ -313,3 +313,39 @@ def test_sim_driver_world_has_the_true_friction_and_mass():
     mu = insp.GetProximityProperties(gid).GetProperty("material", "coulomb_friction")
     assert mu.static_friction() == 0.4
     assert plant.GetBodyByName("ball").default_mass() == pytest.approx(2.5 * s.model.ball_mass)
+
+
+@pytest.mark.parametrize("builder", ["sim_driver", "diagram"])
+def test_true_ee_friction_sets_the_ee_ball_pair_alone(builder):
+    """model.true_ee_friction gives the truth's EE-ball pair that mu (Drake's combination
+    2ab/(a+b) of the EE tip's and the ball's coefficients) and leaves the ball's and the
+    table's geometry at true_friction, in the simulated driver and in `run`'s diagram."""
+    from pydrake.lcm import DrakeLcm
+
+    from adaptive_c3.diagrams.ball_rolling import build_ball_rolling_diagram
+    from adaptive_c3.tools.hardware.sim_driver import build_sim_driver
+    s, _ = load_scenario(cli.resolve_scenario_path("ball_rolling"),
+                         FAST + ["model.true_friction=0.8", "model.true_ee_friction=0.3"])
+    if builder == "sim_driver":
+        built = build_sim_driver(s, DrakeLcm("memq://"))
+    else:
+        built = build_ball_rolling_diagram(s)
+    ctx = built.diagram.CreateDefaultContext()
+    plant = built.plant
+    insp = plant.get_geometry_query_input_port().Eval(
+        plant.GetMyContextFromRoot(ctx)).inspector()
+
+    def mu(body):
+        (gid,) = plant.GetCollisionGeometriesForBody(plant.GetBodyByName(body))
+        return insp.GetProximityProperties(gid).GetProperty(
+            "material", "coulomb_friction").dynamic_friction()
+    a, b = mu("panda_ee_tip"), mu("ball")
+    assert b == 0.8
+    assert 2 * a * b / (a + b) == pytest.approx(0.3)
+
+
+def test_true_ee_friction_outside_what_drake_can_combine_is_a_scenario_error():
+    from adaptive_c3.scenarios.schema import ScenarioError
+    with pytest.raises(ScenarioError, match="true_ee_friction"):
+        load_scenario(cli.resolve_scenario_path("ball_rolling"),
+                      FAST + ["model.true_friction=0.4", "model.true_ee_friction=0.9"])

@@ -94,6 +94,7 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
 
     from adaptive_c3.diagrams.ball_rolling import (_set_panda_start, ball_start_xy,
                                                    make_gait, true_mass, true_radius)
+    from adaptive_c3.diagrams.ball_rolling_world import apply_true_ee_friction
     from adaptive_c3.models.ball_rolling_controller_model import default_state
     from adaptive_c3.models.ball_rolling_scene import add_ball_rolling_scene
     from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
@@ -115,13 +116,14 @@ def build_sim_driver(s, lcm, *, status_period: float = 1e-3, expire_sec: float =
     m = s.model
     R_true = true_radius(s)
     builder = DiagramBuilder()
-    plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
+    plant, scene_graph = AddMultibodyPlant(MultibodyPlantConfig(
         time_step=s.sim_time_step, discrete_contact_approximation="sap"), builder)
     start_xy = ball_start_xy(s)
     scene = add_ball_rolling_scene(plant, ball_radius=R_true, ball_mass=true_mass(s),
                                    ball_position=tuple(start_xy), mu=m.true_friction,
                                    with_arm=True)
     plant.Finalize()
+    apply_true_ee_friction(plant, scene_graph, s, scene.panda)
     x_start = default_state(tuple(start_xy), ball_radius=m.ball_radius,
                             ee_radius=m.ee_radius)
     ee_start = make_gait(s).ee_target("settle", x_start)
