@@ -227,3 +227,81 @@ def test_mass_is_judged_against_its_own_spurious_level():
     r = score_draw(8000, baseline=False)
     assert r["truth"]["name"] == "mass_scale"
     assert r["named"] and r["in_interval"], r["selected"]
+
+
+def test_a_strike_passes_the_ball_at_its_angle_and_speed():
+    """Pusher._strike: the EE's cruise runs at the ball's centre height on a line whose
+    distance from the ball's centre puts the contact normal strike_angle from the path,
+    at strike_speed; a gait without strikes draws no extra random number for them."""
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Pusher
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
+    p = ModelParams()
+    reach = p.ball_radius + p.ee_radius
+    ball, ee = np.array([0.56, 0.01, p.ball_radius]), np.array([0.55, 0.0, 0.12])
+    ex = Excitation(strike_fraction=1.0, strike_angle=(60.0, 60.0), strike_speed=(0.3, 0.3))
+    pusher = Pusher(np.random.default_rng(4), p, np.array([0.55, 0.0]), excitation=ex)
+    pusher._plan(ee, ball, np.zeros(3))
+    cruise = [s for s in pusher.segs if s[3] is not None and s[4] is not None]
+    assert len(cruise) == 1
+    p0, p1, T, v0, v1 = cruise[0]
+    path = (p1 - p0) / np.linalg.norm(p1 - p0)
+    assert np.isclose(p0[2], ball[2]) and np.isclose(p1[2], ball[2])
+    off = (ball - p0) - np.dot(ball - p0, path) * path        # ball centre from the line
+    assert np.isclose(np.linalg.norm(off), reach * np.sin(np.radians(60.0)))
+    assert np.allclose(v0, 0.3 * path) and np.isclose(np.linalg.norm(p1 - p0) / T, 0.3)
+    assert all(np.linalg.norm(s[0][:2] - ball[:2]) > reach for s in pusher.segs[2:4])
+    for strikes in (0.0, 1.0):                 # the random stream of a strike-free gait
+        rng = np.random.default_rng(4)
+        Pusher(rng, p, np.array([0.55, 0.0]),
+               excitation=Excitation(strike_fraction=strikes))._plan(ee, ball, np.zeros(3))
+        after = rng.random()
+        if strikes == 0.0:
+            rng0 = np.random.default_rng(4)
+            Pusher(rng0, p, np.array([0.55, 0.0]))._plan(ee, ball, np.zeros(3))
+            assert after == rng0.random()
+
+
+def test_a_glancing_strike_shows_an_ee_ball_friction_a_push_from_the_top_hides():
+    """The truth's EE-ball mu 0.5 against 1 (Drake, same gait and noise seeds): after
+    glancing strikes the ball ends far from where it ends at mu 1, after the default
+    pushes from the top (which ask the contact for ~0.3 of the normal force) close to it."""
+    from adaptive_c3.tools.diagnosis.harness import concealed_ball_data as cbd
+    from adaptive_c3.tools.diagnosis.harness.concealed_data import Truth
+    clean = Truth("none", "", 0.0, "")
+    low = Truth("friction_coefficient", "ee_ball", 0.5, "1")
+
+    def ends(truth, ex):
+        rec, states = cbd.make_recording(truth, 3, episodes=3, excitation=ex, noise_scale=1.0)
+        return np.array([states[rec.episode == e][-1, 7:9] for e in range(3)])
+    strikes = Excitation(strike_fraction=1.0, duration_s=2.0)
+    pushes = Excitation(duration_s=2.0)
+    moved_strike = np.linalg.norm(ends(low, strikes) - ends(clean, strikes), axis=1)
+    moved_push = np.linalg.norm(ends(low, pushes) - ends(clean, pushes), axis=1)
+    assert np.median(moved_strike) > 0.02                     # m
+    assert np.median(moved_strike) > 5 * np.median(moved_push)
+
+
+def test_a_model_without_side_contact_is_proposed_top_pushes_not_strikes():
+    """The LCS cannot follow a contact sliding along the ball's side (the relaxed cone
+    separates the bodies), so where the Drake backend is proposed strikes the LCS gets
+    light-press top pushes, the proposal's other fields kept; Drake's spec keeps them."""
+    from adaptive_c3.tools.diagnosis.engine.proposals import (LIGHT_PRESS, STRIKES,
+                                                               against_none, proposal,
+                                                               top_pushes_only)
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball import DrakeBallSpec
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import BallSpec
+    assert DrakeBallSpec.side_contact is True and not getattr(BallSpec, "side_contact", False)
+    judged = dict(separating_excitation=[
+        proposal(["none", "friction_coefficient"], against_none("friction_coefficient")),
+        proposal(["none", "rolling_resistance"], against_none("rolling_resistance"))])
+    assert judged["separating_excitation"][0]["excitation"]["strike_fraction"] == \
+        STRIKES["strike_fraction"]
+    coast = dict(judged["separating_excitation"][1])
+    top_pushes_only(judged)
+    fric = judged["separating_excitation"][0]
+    assert "strike_fraction" not in fric["excitation"]
+    assert fric["excitation"]["press"] == LIGHT_PRESS[1]["press"]
+    assert fric["excitation"]["episodes"] == 25          # the longer recording kept
+    assert "instead of strikes" in fric["change"]
+    assert judged["separating_excitation"][1] == coast
+    Excitation().changed(**fric["excitation"])

@@ -180,3 +180,38 @@ def test_the_size_bar_is_one_test_per_effect():
     not_excluded(judged, spec, [fric] + others, none_eval, prob=prob)
     assert judged["verdict"] == "none" and judged["ambiguous"] == []
     assert judged["size_tests"][0]["excluded"] is True
+
+
+class RareSlipProblem(SlipProblem):
+    """SlipProblem whose slips show only in rare windows (indices 10-13 of every 40, as a
+    few strikes among many pushes): a fit that keeps every 40th window sees none."""
+
+    def residuals(self, effects, W):
+        r = super().residuals(effects, W)
+        base = SlipProblem.residuals(self, [], W)
+        rare = np.isin((W.row // 10) % 40, (10, 11, 12, 13))
+        return np.where(rare[:, None, None], r, base)
+
+
+def test_the_size_is_tested_on_the_windows_the_sparse_fit_left_out():
+    """A costly model fits on every 40th window; mu 0.5 slips in windows it never saw.
+    On the fit's windows mu 0.5 is as good as `none`, so it joins; on the left-out windows
+    (boundary.size_test_problem) it is clearly worse and `none` stays confident. The size
+    problem holds exactly the left-out windows, every `stride`-th, in their folds."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
+    spec = _spec()
+    full = RareSlipProblem(spec, truth_mu=1.0, windows=1200)
+    keep = np.arange(1200) % 40 == 0
+    prob = copy.copy(full)
+    prob.windows, prob.fold = full.windows.take(keep), full.fold[keep]
+    dense = size_test_problem(prob, full.windows, full.fold, keep, 2)
+    assert np.array_equal(dense.windows.row, full.windows.row[~keep & (np.arange(1200) % 2 == 0)])
+    assert np.array_equal(dense.fold, full.fold[~keep & (np.arange(1200) % 2 == 0)])
+    assert size_test_problem(prob, full.windows, full.fold, np.ones(1200, bool), 1) is None
+    fric, none_eval = _fric_fit(prob, 0.9, [0.2, 1.6])
+    assert abs(at_size(prob, FRICTION, 0.5, none_eval)) < 2.0
+    for size_prob, joins in ((None, True), (dense, False)):
+        judged = verdict([fric], None, none_eval, 0.1)
+        not_excluded(judged, spec, [fric], none_eval, prob=prob, size_prob=size_prob)
+        assert ("friction_coefficient" in [a["name"] for a in judged["ambiguous"]]) == joins
+        assert judged["size_tests"][0]["excluded"] is not joins

@@ -40,9 +40,11 @@ from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, ap
                                                 cartpole_spec, patch)
 from adaptive_c3.tools.diagnosis.engine.evidence import (evidence_windows, free_ball_verdict,
                                                   not_excluded, require_support,
-                                                  widen_for_phases, window_phases)
+                                                  top_pushes_only, widen_for_phases,
+                                                  window_phases)
 from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
                                              widen_for_nuisance)
+from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
@@ -268,7 +270,11 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                                               none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
-    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob)
+    es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
+    not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
+                 size_prob=size_test_problem(prob, WH, foldH, keep, es))
+    if not getattr(spec, "side_contact", False):
+        top_pushes_only(judged)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
@@ -279,7 +285,6 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     sigma_report = calibrate_noise(spec, rec, P0, sigma) \
         if getattr(spec, "calibrated_noise", False) else sigma
     floor_report = prediction_floor(P0, sigma_report, horizon)
-    es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
     E1, e1 = W1.take(np.arange(len(W1)) % es == 0), fold1[::es]
     EH, eH = WH.take(np.arange(len(WH)) % es == 0), foldH[::es]
     inside1, insideH = in_windows(E1, windows, rec), in_windows(EH, windows, rec)

@@ -21,58 +21,16 @@ from dataclasses import replace
 
 import numpy as np
 
+from adaptive_c3.tools.diagnosis.engine.proposals import (  # noqa: F401 (re-exported)
+    COAST, DEFAULT_SEPARATION, EFFECT_PHASES, LIGHT_PRESS, MORE_EVIDENCE, NO_GAIT, SEPARATING, STRIKES,
+    against_none, proposal, top_pushes_only, with_more_of_everything)
+
 Z_AMBIG = 2.0
 EE_CLEAR = 0.004          # m: EE-ball gap of a free window
 EE_TOUCH = 0.001          # m: EE-ball gap of a push window
 ON_TABLE = 0.003          # m: ball-table gap of a rolling ball
 MOVING = 0.02             # m/s
 
-EFFECT_PHASES = {
-    "rolling_resistance": ("coast",), "viscous_damping": ("coast",),
-    "external_force": ("coast", "rest"), "mass_scale": ("push",),
-    "friction_coefficient": ("push",), "contact_offset": ("push", "coast", "rest"),
-}
-
-# The excitation that separates two effects, or gives one more evidence: the text of
-# the report and the change to the push gait (ball_excitation.Excitation fields) that
-# runs it. A release push lets go of the ball at the given speed (the EE lifts off
-# while still moving), so the ball coasts freely.
-COAST = dict(release_speed=[0.1, 0.2], duration_s=2.4)
-COAST_BOTH_WAYS = dict(COAST, directions="axes")
-PRESS_DEPTHS = dict(press=[0.003, 0.008], episodes=25)
-
-# (effect a, effect b) -> (text, gait change)
-SEPARATING = {
-    frozenset({"rolling_resistance", "viscous_damping"}): (
-        "pushes that release the ball at 0.1-0.2 m/s (the EE lifts off while still moving) "
-        "and >= 1 s of free coast: rolling resistance decelerates the ball at a constant "
-        "rate, viscous drag in proportion to its speed", COAST),
-    frozenset({"external_force", "rolling_resistance"}): (
-        "release pushes along +x, +y, -x, -y in turn, then >= 1 s of free coast: a fixed "
-        "force speeds the ball up one way and slows it the other, rolling resistance always "
-        "opposes motion", COAST_BOTH_WAYS),
-    frozenset({"external_force", "viscous_damping"}): (
-        "release pushes along +x, +y, -x, -y in turn, then >= 1 s of free coast: a fixed "
-        "force acts the same at every speed and direction, drag opposes the motion in "
-        "proportion to speed", COAST_BOTH_WAYS),
-    frozenset({"mass_scale", "friction_coefficient"}): (
-        "more pushes (25 episodes) at peak accelerations of 8-12 m/s^2: a lighter or heavier "
-        "ball changes the EE's response in proportion to the acceleration, low EE-ball "
-        "friction shows only when the push approaches slip",
-        dict(peak_accel=[8.0, 12.0], episodes=25)),
-    frozenset({"mass_scale", "contact_offset"}): (
-        "pushes with press depths from 3 to 8 mm (25 episodes): an offset shifts where "
-        "contact starts, the mass scales the EE's response to its force once in contact",
-        PRESS_DEPTHS),
-    frozenset({"friction_coefficient", "contact_offset"}): (
-        "pushes with press depths from 3 to 8 mm at 8-10 m/s^2 (25 episodes): friction "
-        "limits the tangential force at a given normal force, an offset shifts the normal "
-        "force", dict(PRESS_DEPTHS, peak_accel=[8.0, 10.0])),
-}
-DEFAULT_SEPARATION = (
-    "a longer recording (25 episodes of 2.4 s) whose pushes release the ball at up to "
-    "0.15 m/s: free coasts and rests next to pushes of every speed",
-    dict(episodes=25, duration_s=2.4, release_speed=[0.0, 0.15]))
 
 def window_phases(spec, W) -> np.ndarray:
     """[W] phase name per rollout window (all `other` for models without the cache)."""
@@ -118,65 +76,6 @@ def evidence_windows(spec, W, phases, gain, name: str, top: int = 5) -> dict:
                 share_in_phases=float(np.sum(gain[own]) / total) if total > 0 else 0.0,
                 phase_windows={p: int(np.sum(phases == p)) for p in ("coast", "rest", "push")},
                 windows=runs[:top])
-
-
-MORE_EVIDENCE = {        # effect -> (text, gait change) that gives it more evidence
-    # pushes that end at rest: on release pushes the LCS reads a clean draw's ball as
-    # 1.5-3x heavier (dev draws 12017, 12021, 12025, 12039: 1.51-2.97 whatever the truth,
-    # 0.66-1.67), where acceleration-rich pushes that end at rest read 0.58-1.32
-    "mass_scale": ("more pushes (25 episodes) at peak accelerations of 8-12 m/s^2 that "
-                   "end at rest: the ball's inertia shows in the EE's response to its known "
-                   "force while it accelerates and brakes the ball",
-                   dict(peak_accel=[8.0, 12.0], episodes=25)),
-    "friction_coefficient": ("pushes at 8-10 m/s^2 with a light press (3-4 mm): low "
-                             "EE-ball friction shows as slip",
-                             dict(peak_accel=[8.0, 10.0], press=[0.003, 0.004])),
-    "rolling_resistance": ("pushes that release the ball at 0.1-0.2 m/s and >= 1 s of free "
-                           "coast", COAST),
-    "viscous_damping": ("pushes that release the ball at 0.15-0.25 m/s and >= 1 s of free "
-                        "coast (drag grows with speed)",
-                        dict(COAST, release_speed=[0.15, 0.25])),
-    "external_force": ("release pushes along +x, +y, -x, -y in turn and >= 1 s of free "
-                       "coast", COAST_BOTH_WAYS),
-    "contact_offset": ("slow touch-downs (the last 6 mm in 0.4 s) and >= 1 s rests",
-                       dict(touchdown_s=0.4, duration_s=2.4)),
-}
-
-
-NO_GAIT = ("a longer recording whose inputs excite the system more widely (other "
-           "amplitudes and frequencies)", {})
-
-
-# A push-phase effect against `none`: a longer recording of pushes that end at rest
-# (release pushes are where the LCS reads spurious mass and EE-ball friction: on clean
-# dev draws 12017 and 12021 the default separation's slow releases with light presses
-# read mass 2.1 / 3.0 and mu 3.0, the same pushes ending at rest 1.02 / 0.74, 0.72 / 1.04)
-LONGER_PUSHES = ("a longer recording (25 episodes of 2.4 s)", dict(episodes=25, duration_s=2.4))
-
-
-def with_more_of_everything(text_change: tuple, effect: str = "") -> tuple:
-    """An effect against `none`: its own excitation within the default longer recording
-    (the data showed little of anything, so the other effects get evidence too); for an
-    effect seen in pushes only, a longer recording of pushes that end at rest."""
-    text, change = text_change
-    if change == DEFAULT_SEPARATION[1]:
-        return text_change
-    longer = LONGER_PUSHES if EFFECT_PHASES.get(effect) == ("push",) else DEFAULT_SEPARATION
-    return (f"{text}; within {longer[0]}", {**longer[1], **change})
-
-
-def against_none(effect: str) -> tuple:
-    """(text, gait change) that tells `effect` from the unmodified model."""
-    return with_more_of_everything(MORE_EVIDENCE.get(effect, DEFAULT_SEPARATION), effect)
-
-
-def proposal(between: list, text_change: tuple) -> dict:
-    """A separating_excitation entry: who it separates, the text, the gait change."""
-    text, change = text_change
-    out = dict(between=between, change=text)
-    if change:
-        out["excitation"] = dict(change)
-    return out
 
 
 def fit_row(f, none_eval) -> dict:
@@ -360,7 +259,8 @@ def _join(judged, first: dict, other: dict, how: tuple | None = None) -> None:
     judged["verdict"] = "ambiguous"
 
 
-def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=None) -> None:
+def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=None,
+                 size_prob=None) -> None:
     """A `none` (the verdict, or a member of the ambiguous set) claims that the data rule
     out every effect of a size that matters (spec.relevant_size: (below, above) the
     nominal value). A single physical effect whose 95 % interval reaches that far is as
@@ -379,9 +279,12 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     excluded whatever the linearised interval says (not for offsets read through a
     calibration shift or a model-form bias, whose sizes are not the model's values). On a
     rugged cost, a fit worse than `none` on the held-out windows has its interval left
-    unread and the sizes that matter tested directly (boundary.untrusted_interval)."""
+    unread and the sizes that matter tested directly (boundary.untrusted_interval).
+    size_prob: where the size tests are scored (boundary.size_test_problem; default
+    prob)."""
     from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, size_sides,
                                                             untrusted_interval)
+    from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
     sizes = getattr(spec, "relevant_size", None) or {}
     shift = shift or {}
@@ -390,6 +293,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
     z_excl = size_z()
+    size_none = None
     mf = getattr(spec, "model_form_bias", None) or {}
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
@@ -413,7 +317,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
             if direct else []
         if untrusted and not sides:
             continue
-        out, tested = excluded(prob, f, sides, none_eval, z_excl)
+        if size_prob is not None and sides and size_none is None:
+            size_none = evaluate(size_prob, None)
+        out, tested = excluded(prob if size_prob is None else size_prob, f, sides,
+                               none_eval if size_prob is None else size_none, z_excl)
         if tested:
             judged.setdefault("size_tests", []).append(dict(
                 name=c.label(), excluded=bool(out),

@@ -34,6 +34,9 @@ class Excitation:
                                            # others end at rest)
     directions: str = "random"             # random | axes (+x, +y, -x, -y in turn)
     touchdown_s: float = 0.15              # s, the last 6 mm of the descent onto the top
+    strike_fraction: float = 0.0           # of the episodes, strikes instead of pushes
+    strike_speed: tuple = (0.2, 0.35)      # m/s, the EE's planned speed through a strike
+    strike_angle: tuple = (50.0, 70.0)     # deg, contact normal from the EE's path
 
     def __post_init__(self):
         """A one-line ValueError for a gait no push can follow."""
@@ -42,16 +45,21 @@ class Excitation:
         for name in ("duration_s", "touchdown_s"):
             if not np.isfinite(getattr(self, name)) or getattr(self, name) <= 0:
                 raise ValueError(f"excitation {name} must be > 0, got {getattr(self, name)}")
-        for name in ("press", "push_length", "peak_accel", "release_speed"):
+        for name in ("press", "push_length", "peak_accel", "release_speed", "strike_speed",
+                     "strike_angle"):
             r = getattr(self, name)
             if (len(r) != 2 or not np.all(np.isfinite(r)) or r[0] < 0 or r[1] < r[0]
                     or (name != "release_speed" and r[0] <= 0)):
                 raise ValueError(f"excitation {name} must be a range [low, high] with "
                                  f"0 {'<=' if name == 'release_speed' else '<'} low <= high, "
                                  f"got {list(r)}")
-        if not 0.0 <= self.release_fraction <= 1.0:
-            raise ValueError(f"excitation release_fraction must be in [0, 1], "
-                             f"got {self.release_fraction}")
+        for name in ("release_fraction", "strike_fraction"):
+            if not 0.0 <= getattr(self, name) <= 1.0:
+                raise ValueError(f"excitation {name} must be in [0, 1], "
+                                 f"got {getattr(self, name)}")
+        if self.strike_angle[1] >= 85.0:
+            raise ValueError(f"excitation strike_angle must stay below 85 deg (a strike that "
+                             f"grazes the ball), got {list(self.strike_angle)}")
         if self.directions not in ("random", "axes"):
             raise ValueError(f"excitation directions must be random or axes, "
                              f"got {self.directions!r}")
@@ -121,7 +129,8 @@ class Pusher:
     Segments are (p0, p1, T, v0, v1); v None means at rest."""
 
     LIFT_S = 0.12          # s, lift-off while moving (release pushes)
-    STOP_S = 0.3           # s, the EE's horizontal stop after a release
+    STOP_S = 0.3           # s, the EE's horizontal stop after a release or a strike
+    RUN_UP_M = 0.04        # m, a strike's run-up to its speed
 
     def __init__(self, rng, p, center, pushes: int = 1, excitation: Excitation = Excitation(),
                  episode: int = 0):
@@ -143,6 +152,10 @@ class Pusher:
     def _plan(self, ee, ball, vball):
         rng, ex, R, r = self.rng, self.ex, self.p.ball_radius, self.p.ee_radius
         ball = ball + 0.3 * vball * np.array([1, 1, 0])       # where it will roughly be
+        if ex.strike_fraction > 0 and (ex.strike_fraction >= 1.0
+                                       or rng.random() < ex.strike_fraction):
+            self.segs = self._strike(ee, ball)
+            return
         d = self._direction(ball)
         high = 2 * R + r + 0.025
         # lower onto its top, press and roll it along d (the EE and the ball's top move
@@ -175,6 +188,37 @@ class Pusher:
             segs += [(start, end, 1.5 * L / (2.0 * release), None, v),
                      (end, lift, self.LIFT_S, v, v), (lift, stop, self.STOP_S, v, None)]
         self.segs = [list(s) + [None] * (5 - len(s)) for s in segs]
+
+    def _strike(self, ee, ball) -> list:
+        """A glancing strike: the EE, its centre at the ball's centre height, runs up to
+        strike_speed along d on a line offset sideways so that the contact normal is
+        strike_angle from d, passes the ball, stops and lifts. The ball leaves along the
+        normal plus what friction adds along d, and the EE's speed drops by what it gave:
+        the ball's mass sets the split of the normal impulse, the EE-ball friction (up to
+        its mu) the tangential one. Returns the segments (p0, p1, T, v0, v1)."""
+        rng, ex, R, r = self.rng, self.ex, self.p.ball_radius, self.p.ee_radius
+        d = self._direction(ball)
+        side = np.array([-d[1], d[0], 0.0]) * (1.0 if rng.random() < 0.5 else -1.0)
+        theta = np.radians(rng.uniform(*ex.strike_angle))
+        speed = rng.uniform(*ex.strike_speed)
+        reach = R + r
+        centre = np.array([ball[0], ball[1], ball[2]])
+        line = centre + reach * np.sin(theta) * side           # the EE centre's path
+        run_up = self.RUN_UP_M
+        start = line - (reach * np.cos(theta) + 0.01 + run_up) * d
+        fast = start + run_up * d                                # strike_speed from here
+        past = line + (reach * np.cos(theta) + 0.03) * d
+        stop = past + 0.5 * speed * self.STOP_S * d
+        high = 2 * R + r + 0.025
+        up, above, lift = ee.copy(), start.copy(), stop.copy()
+        up[2] = max(ee[2], high)
+        above[2] = lift[2] = high
+        v = speed * d
+        segs = [(ee.copy(), up, 0.12), (up, above, 0.25), (above, start, 0.3),
+                (start, fast, 2.0 * run_up / speed, None, v),
+                (fast, past, float(np.linalg.norm(past - fast)) / speed, v, v),
+                (past, stop, self.STOP_S, v, None), (stop, lift, 0.15)]
+        return [list(s) + [None] * (5 - len(s)) for s in segs]
 
     def target(self, t_in_seg, ee, ball, vball):
         """(p_ref, v_ref) - plans a new push when the last one ends."""

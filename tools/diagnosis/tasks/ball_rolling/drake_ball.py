@@ -103,6 +103,9 @@ class DrakeBallSpec(BallSpec):
     # (engine/fit.py signed_rank_z): a drag's gain sits in a few fast coasts, which caps
     # the paired z (docs/diagnosis.md, "Free-ball effects are judged by ranks")
     free_z_stat: str = "signed_rank"
+    # contacts that slide along the ball's side are Drake's to follow (the push gait's
+    # glancing strikes, evidence.STRIKES); the LCS's relaxed cone separates such bodies
+    side_contact: bool = True
     roller: object = None
     rollouts: OrderedDict = field(default_factory=OrderedDict)
 
