@@ -22,8 +22,8 @@ from dataclasses import replace
 import numpy as np
 
 from adaptive_c3.tools.diagnosis.engine.proposals import (  # noqa: F401 (re-exported)
-    COAST, DEFAULT_SEPARATION, EFFECT_PHASES, LIGHT_PRESS, MORE_EVIDENCE, NO_GAIT, SEPARATING, STRIKES,
-    against_none, proposal, top_pushes_only, with_more_of_everything)
+    COAST, DEFAULT_SEPARATION, EFFECT_PHASES, LIGHT_PRESS, MORE_EVIDENCE, NO_GAIT,
+    SEPARATING, STRIKES, against_none, proposal, top_pushes_only, with_more_of_everything)
 
 Z_AMBIG = 2.0
 EE_CLEAR = 0.004          # m: EE-ball gap of a free window
