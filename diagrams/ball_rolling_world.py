@@ -10,7 +10,8 @@ import numpy as np
 
 from adaptive_c3.models.ball_rolling_controller_model import default_state
 from adaptive_c3.models.ball_rolling_scene import (EE_TIP_FRAME, add_ball_rolling_scene,
-                                                   add_point_ee, set_body_friction)
+                                                   add_point_ee, partner_friction,
+                                                   set_body_friction)
 from adaptive_c3.scenarios.ball_rolling_schema import BallRollingScenario
 from adaptive_c3.systems.rolling.gait import CirclePath, GaitSettings, RollingGait
 
@@ -74,12 +75,6 @@ def true_world(s: BallRollingScenario):
     return add
 
 
-def ee_geometry_friction(pair_mu: float, ball_mu: float) -> float:
-    """The EE geometry's mu that makes Drake's combined EE-ball mu (2 a b / (a + b)) equal
-    pair_mu with the ball's geometry at ball_mu (needs pair_mu < 2 ball_mu)."""
-    return pair_mu * ball_mu / (2.0 * ball_mu - pair_mu)
-
-
 def apply_true_ee_friction(plant, scene_graph, s: BallRollingScenario, panda=None,
                            ee_instance=None) -> None:
     """Gives the truth's EE-ball pair the friction model.true_ee_friction (when >= 0) by
@@ -93,4 +88,4 @@ def apply_true_ee_friction(plant, scene_graph, s: BallRollingScenario, panda=Non
     else:
         tip = plant.GetBodyByName(plant.GetModelInstanceName(ee_instance), ee_instance)
     set_body_friction(plant, scene_graph, tip,
-                      ee_geometry_friction(m.true_ee_friction, m.true_friction))
+                      partner_friction(m.true_ee_friction, m.true_friction))

@@ -133,6 +133,12 @@ def add_ball_rolling_scene(plant: MultibodyPlant, *, ball_radius: float = BALL_R
     return BallRollingScene(panda, ball, ball_radius, table_top_z)
 
 
+def partner_friction(pair_mu: float, other_mu: float) -> float:
+    """The coefficient a geometry needs so that Drake's combination with a geometry of
+    other_mu, 2ab/(a+b), is pair_mu (needs pair_mu < 2 other_mu)."""
+    return pair_mu * other_mu / (2 * other_mu - pair_mu)
+
+
 def set_body_friction(plant: MultibodyPlant, scene_graph, body, mu: float) -> None:
     """Replaces the Coulomb friction (static = dynamic = mu) of every collision geometry
     of `body`, keeping the rest of its proximity properties. Call after Finalize and

@@ -182,6 +182,7 @@ class TruePlant:
 
     def __init__(self, p: ModelParams, truth: Truth, var: Variation = Variation()):
         from pydrake.systems.analysis import Simulator
+        from adaptive_c3.models.ball_rolling_scene import partner_friction
         from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import (BallWorld,
                                                                               build_ball_plant)
         self.truth, self.p = truth, p
@@ -197,7 +198,7 @@ class TruePlant:
             ball_m = p.ball_mass * t.value
         if t.name == "friction_coefficient":       # Drake combines 2ab/(a+b); ball stays mu
             other = "ee" if t.target == "ee_ball" else "table"
-            mu[other] = t.value * p.mu / (2 * p.mu - t.value)
+            mu[other] = partner_friction(t.value, p.mu)
         self.ee_r, self.ball_r, self.ball_m, self.table_z = ee_r, ball_r, ball_m, table_z
         world = BallWorld(ee_radius=ee_r, ball_radius=ball_r, ball_mass=ball_m,
                           ee_mass=p.ee_mass, mu_ee=mu["ee"], mu_ball=mu["ball"],

@@ -42,9 +42,9 @@ class BallWorld:
 def geometry_friction(mu_ee_ball: float, mu_ball_table: float) -> tuple[float, float, float]:
     """(mu_ee, mu_ball, mu_table) per geometry whose combinations 2ab/(a+b) are the given
     per-pair coefficients (the ball gets the larger one; both pairs exact)."""
+    from adaptive_c3.models.ball_rolling_scene import partner_friction
     mb = max(mu_ee_ball, mu_ball_table)
-    return (mu_ee_ball * mb / (2 * mb - mu_ee_ball), mb,
-            mu_ball_table * mb / (2 * mb - mu_ball_table))
+    return partner_friction(mu_ee_ball, mb), mb, partner_friction(mu_ball_table, mb)
 
 
 @dataclass
