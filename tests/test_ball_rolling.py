@@ -196,7 +196,7 @@ def test_shipped_sweeps_plan_their_cells():
         assert s.model.radius_error == 0.0 and not s.camera.enabled
     plan = load_sweep(SCENARIO_DIR / "ee_friction_sweep.yaml")
     ee_friction = plan_trials(plan)
-    assert len(ee_friction) == 6 * 2
+    assert len(ee_friction) == 8 * 3
     for t in ee_friction:     # every cell loads, the EE-ball pair alone off
         s, _ = load_scenario(plan["scenario"], t["overrides"])
         assert s.model.true_ee_friction == t["cell"]["model.true_ee_friction"]

@@ -166,7 +166,8 @@ class BallSpec(SystemSpec):
     # turns in 60 s and 11.6-12.7 mm tracking for every mass, the same first contact),
     # and the ball is ~10 % of the pushed inertia, so pushes bound its mass loosely;
     # a simulation off by 2x is still worth naming. EE-ball mu: the controller lost
-    # the ball at 0.4 and below, not at 0.5 (scenarios/ee_friction_sweep.yaml). A
+    # the ball at 0.4 and below, held from about 0.43 (scenarios/ee_friction_sweep.yaml);
+    # 0.5 keeps a margin. A
     # lower EE-ball mu shows only where a push slips (a higher one acts as the model's);
     # drag and rolling resistance are never negative; a drag of 0.1 N*s/m takes ~25 % of
     # a 0.2 m/s coast's speed in 0.5 s. Table mu is not listed: rolling from the top asks
