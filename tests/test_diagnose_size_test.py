@@ -215,3 +215,62 @@ def test_the_size_is_tested_on_the_windows_the_sparse_fit_left_out():
         not_excluded(judged, spec, [fric], none_eval, prob=prob, size_prob=size_prob)
         assert ("friction_coefficient" in [a["name"] for a in judged["ambiguous"]]) == joins
         assert judged["size_tests"][0]["excluded"] is not joins
+
+
+class WeakSlipProblem(ScaledSlipProblem):
+    """ScaledSlipProblem over `windows` windows (a faint slip: a few % of the error)."""
+
+    def __init__(self, spec, truth_mu: float, gain: float, windows: int):
+        SlipProblem.__init__(self, spec, truth_mu, windows=windows)
+        self.gain = gain
+
+
+def _sparse_and_left_out(truth_mu: float):
+    """(fit problem on every 40th of 1200 windows, the left-out problem: every 2nd of the
+    rest) for a faint slip at truth_mu."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
+    full = WeakSlipProblem(_spec(), truth_mu, gain=0.05, windows=1200)
+    keep = np.arange(1200) % 40 == 0
+    prob = copy.copy(full)
+    prob.windows, prob.fold = full.windows.take(keep), full.fold[keep]
+    return prob, size_test_problem(prob, full.windows, full.fold, keep, 2)
+
+
+def test_a_choice_the_left_out_windows_confirm_drops_none_from_the_set():
+    """mu 0.5 in the data, faint: on the fit's 30 sparse windows the chosen mu 0.5 cuts
+    the error by under 1 % with z < 2, so `none` joins it (verdict); on the 570 windows
+    the fit left out it beats `none` clearly (z >= 2), so the verdict is named, with the
+    test recorded and the report saying so."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import confirm_on_left_out
+    prob, left_out = _sparse_and_left_out(0.5)
+    fric, none_eval = _fric_fit(prob, 0.5, [0.2, 1.6])
+    judged = verdict([fric], fric, none_eval, 0.001)
+    assert fric.z_vs_none < 2.0
+    assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "none"]
+    confirm_on_left_out(judged, fric, left_out, lambda: evaluate(left_out, None), 2.0)
+    c = judged["confirmation"]
+    assert c["confirmed"] and c["z_vs_none"] >= 2.0 and c["windows"] == 570
+    assert judged["verdict"] == "named" and judged["ambiguous"] == []
+    assert judged["separating_excitation"] == []
+    assert "Confirmed on 570 held-out windows" in ambiguity_summary(judged)
+
+
+def test_a_choice_the_left_out_windows_do_not_confirm_keeps_none():
+    """Clean data (mu 1) with mu 0.5 chosen beside `none`: on the left-out windows it is
+    worse than `none`, so the set keeps `none` and the test is recorded as failed. A set
+    where `none` came first, or a problem without left-out windows, is left untouched."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import confirm_on_left_out
+    prob, left_out = _sparse_and_left_out(1.0)
+    fric, none_eval = _fric_fit(prob, 0.5, [0.2, 1.6])
+    judged = verdict([fric], fric, none_eval, 0.001)
+    assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "none"]
+    before = copy.deepcopy(judged)
+    confirm_on_left_out(judged, fric, left_out, lambda: evaluate(left_out, None), 2.0)
+    assert judged["confirmation"]["confirmed"] is False
+    assert judged["confirmation"]["z_vs_none"] < 0.0
+    assert {k: v for k, v in judged.items() if k != "confirmation"} == before
+    for args in ((before, fric, None), (dict(before, ambiguous=before["ambiguous"][::-1]),
+                                        fric, left_out)):
+        j = copy.deepcopy(args[0])
+        confirm_on_left_out(j, args[1], args[2], lambda: evaluate(left_out, None), 2.0)
+        assert "confirmation" not in j and j["verdict"] == "ambiguous"

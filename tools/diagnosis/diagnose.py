@@ -28,6 +28,7 @@ of the model it checks), so re-diagnosing with the patched scenario should say `
 """
 from __future__ import annotations
 
+import functools
 import tempfile
 import time
 from pathlib import Path
@@ -38,13 +39,13 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.engine.evidence import (evidence_windows, free_ball_verdict,
-                                                  not_excluded, require_support,
+from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows,
+                                                  free_ball_verdict, not_excluded, require_support,
                                                   top_pushes_only, widen_for_phases,
                                                   window_phases)
-from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, fit_nuisance, select,
-                                             widen_for_nuisance)
-from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
+from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, evaluate,
+                                             fit_nuisance, select, widen_for_nuisance)
+from adaptive_c3.tools.diagnosis.engine.boundary import confirm_on_left_out, size_test_problem
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
@@ -271,8 +272,12 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                                               chosen.cands[0].name)
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
     es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
+    left_out = size_test_problem(prob, WH, foldH, keep, es)
+    left_none = functools.cache(lambda: evaluate(left_out, None))   # `none` there, once
+    if any(chosen is f for f in fits):     # judged on all windows (not the free ones)
+        confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG)
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
-                 size_prob=size_test_problem(prob, WH, foldH, keep, es))
+                 size_prob=left_out, size_none=left_none)
     if not getattr(spec, "side_contact", False):
         top_pushes_only(judged)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))

@@ -17,6 +17,7 @@ clearly beats the unmodified model (paired z >= Z_AMBIG).
 """
 from __future__ import annotations
 
+import functools
 from dataclasses import replace
 
 import numpy as np
@@ -260,7 +261,7 @@ def _join(judged, first: dict, other: dict, how: tuple | None = None) -> None:
 
 
 def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=None,
-                 size_prob=None) -> None:
+                 size_prob=None, size_none=None) -> None:
     """A `none` (the verdict, or a member of the ambiguous set) claims that the data rule
     out every effect of a size that matters (spec.relevant_size: (below, above) the
     nominal value). A single physical effect whose 95 % interval reaches that far is as
@@ -281,7 +282,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     rugged cost, a fit worse than `none` on the held-out windows has its interval left
     unread and the sizes that matter tested directly (boundary.untrusted_interval).
     size_prob: where the size tests are scored (boundary.size_test_problem; default
-    prob)."""
+    prob); size_none: a callable giving `none`'s evaluation there (computed once)."""
     from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, size_sides,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
@@ -293,7 +294,8 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
     z_excl = size_z()
-    size_none = None
+    left_none = (size_none or functools.cache(lambda: evaluate(size_prob, None))) \
+        if size_prob is not None else None
     mf = getattr(spec, "model_form_bias", None) or {}
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
@@ -317,10 +319,8 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
             if direct else []
         if untrusted and not sides:
             continue
-        if size_prob is not None and sides and size_none is None:
-            size_none = evaluate(size_prob, None)
         out, tested = excluded(prob if size_prob is None else size_prob, f, sides,
-                               none_eval if size_prob is None else size_none, z_excl)
+                               none_eval if size_prob is None else left_none(), z_excl)
         if tested:
             judged.setdefault("size_tests", []).append(dict(
                 name=c.label(), excluded=bool(out),

@@ -129,7 +129,7 @@ def _judged(result) -> dict:
     j = result.get("judged") or dict(verdict="none" if result["chosen"] is None else "named",
                                      ambiguous=[], separating_excitation=[])
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
-                              "size_tests") if k in j}
+                              "size_tests", "confirmation") if k in j}
 
 
 def ambiguity_summary(report) -> str:
@@ -146,6 +146,12 @@ def ambiguity_summary(report) -> str:
     if ruled:
         out += (f" Ruled out at the size that matters (the model fixed there is clearly "
                 f"worse than without it on held-out windows): {', '.join(ruled)}.")
+    c = report.get("confirmation")
+    if c and c["confirmed"]:
+        out += (f" Confirmed on {c['windows']} held-out windows the fit never used: "
+                f"{c['name']} beats the unmodified model there (cluster z "
+                f"{c['z_vs_none']:.2f}, {100 * c['reduction']:.1f}% less error), so `none` "
+                f"is not kept beside it.")
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "

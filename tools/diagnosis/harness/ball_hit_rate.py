@@ -23,6 +23,8 @@ diagnosed and scored:
   size_excluded  effects whose size that matters the data ruled out directly
                  (engine/boundary.py), though their interval reached it or was not read
   size_tests     every such test: the effect, the sizes tried and their z against `none`
+  confirmation   the chosen effect against `none` on the windows the fit left out, where
+                 `none` had joined it (engine/boundary.py confirm_on_left_out)
   ambiguous_notes  per member of the ambiguous set, why it joined (its `note`, e.g. "not
                  excluded: its fit is worse than `none` ...", or require_support's
                  `reason`: the chosen effect's interval holds the model's value)
