@@ -45,7 +45,8 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windo
                                                   window_phases)
 from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, evaluate,
                                              fit_nuisance, select, widen_for_nuisance)
-from adaptive_c3.tools.diagnosis.engine.boundary import confirm_on_left_out, size_test_problem
+from adaptive_c3.tools.diagnosis.engine.boundary import (confirm_on_left_out, left_out_scores,
+                                                         size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
@@ -278,6 +279,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG)
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
                  size_prob=left_out, size_none=left_none)
+    left_out_scores(judged, fits, left_out, left_none)
     if not getattr(spec, "side_contact", False):
         top_pushes_only(judged)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))

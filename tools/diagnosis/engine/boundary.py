@@ -137,3 +137,25 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float) -> N
                                        if "none" not in p["between"]]
     if len(judged["ambiguous"]) < 2:
         judged.update(verdict="named", ambiguous=[], separating_excitation=[])
+
+
+def left_out_scores(judged, fits, size_prob, size_none) -> None:
+    """Record, for each single-effect member of a set that holds `none`, its fit (fold
+    values) against `none` on the left-out windows: judged["left_out"] = [{name,
+    z_vs_none, reduction}]. A record for the report and the harness; no answer changes."""
+    from adaptive_c3.tools.diagnosis.engine.fit import evaluate
+    amb = judged.get("ambiguous") or []
+    if size_prob is None or not any(a["name"] == "none" for a in amb):
+        return
+    by_label = {f.label(): f for f in fits if len(f.cands) == 1}
+    none_ssr, _, none_c, _ = size_none()
+    out = []
+    for a in amb:
+        f = by_label.get(f"{a['name']}[{a['target']}]" if a["target"] else a["name"])
+        if a["name"] == "none" or f is None:
+            continue
+        ssr, _, per_c, _ = evaluate(size_prob, f)
+        out.append(dict(name=f.label(), z_vs_none=float(cluster_z(none_c, per_c,
+                                                                   size_prob.z_stat)),
+                        reduction=float(1.0 - ssr / none_ssr)))
+    judged["left_out"] = out

@@ -419,7 +419,7 @@ def judged_fields(result, truth) -> dict:
                           for f in result.get("nuisance", [])],
                 size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]],
                 size_tests=list(j.get("size_tests", [])),
-                confirmation=j.get("confirmation"),
+                confirmation=j.get("confirmation"), left_out=j.get("left_out"),
                 ambiguous_notes=[a.get("note") or a.get("reason", "")
                                  for a in j.get("ambiguous", [])],
                 held_out_ci=getattr(result.get("chosen"), "held_out_ci", None),
