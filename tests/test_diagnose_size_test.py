@@ -259,7 +259,8 @@ def test_a_choice_the_left_out_windows_do_not_confirm_keeps_none():
     """Clean data (mu 1) with mu 0.5 chosen beside `none`: on the left-out windows it is
     worse than `none`, so the set keeps `none` and the test is recorded as failed. A set
     where `none` came first, or a problem without left-out windows, is left untouched."""
-    from adaptive_c3.tools.diagnosis.engine.boundary import confirm_on_left_out
+    from adaptive_c3.tools.diagnosis.engine.boundary import (confirm_on_left_out,
+                                                            left_out_scores)
     prob, left_out = _sparse_and_left_out(1.0)
     fric, none_eval = _fric_fit(prob, 0.5, [0.2, 1.6])
     judged = verdict([fric], fric, none_eval, 0.001)
@@ -269,6 +270,9 @@ def test_a_choice_the_left_out_windows_do_not_confirm_keeps_none():
     assert judged["confirmation"]["confirmed"] is False
     assert judged["confirmation"]["z_vs_none"] < 0.0
     assert {k: v for k, v in judged.items() if k != "confirmation"} == before
+    left_out_scores(judged, [fric], left_out, lambda: evaluate(left_out, None))
+    assert [m["name"] for m in judged["left_out"]] == ["friction_coefficient[ee_ball]"]
+    assert judged["left_out"][0]["z_vs_none"] == judged["confirmation"]["z_vs_none"]
     for args in ((before, fric, None), (dict(before, ambiguous=before["ambiguous"][::-1]),
                                         fric, left_out)):
         j = copy.deepcopy(args[0])

@@ -129,7 +129,7 @@ def _judged(result) -> dict:
     j = result.get("judged") or dict(verdict="none" if result["chosen"] is None else "named",
                                      ambiguous=[], separating_excitation=[])
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
-                              "size_tests", "confirmation") if k in j}
+                              "size_tests", "confirmation", "left_out") if k in j}
 
 
 def ambiguity_summary(report) -> str:
