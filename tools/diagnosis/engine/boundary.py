@@ -115,9 +115,9 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float) -> N
     right with `none` beside them (intervals 0.07..3 and 0.2..1.46). The test: the fit's
     fold values (each fitted without its fold) rolled out on the left-out windows of
     that fold, against `none` (size_none(): its evaluation there, computed once), by the
-    problem's cluster z; confirmed at z >= z_bar. The
-    effect, its values and the windows are fixed before the test; nothing is fitted on
-    them. Recorded as judged["confirmation"]; other members of the set stay."""
+    problem's cluster z; confirmed at z >= z_bar. The effect (or pair), its values and
+    the windows are fixed before the test; nothing is fitted on them. Recorded as
+    judged["confirmation"]; other members of the set stay."""
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     amb = judged.get("ambiguous") or []
     if size_prob is None or chosen is None or len(amb) < 2 or \

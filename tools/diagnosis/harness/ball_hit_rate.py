@@ -25,6 +25,8 @@ diagnosed and scored:
   size_tests     every such test: the effect, the sizes tried and their z against `none`
   confirmation   the chosen effect against `none` on the windows the fit left out, where
                  `none` had joined it (engine/boundary.py confirm_on_left_out)
+  left_out       each single member beside `none`: its own fit against `none` there
+                 (a record; no answer depends on it)
   ambiguous_notes  per member of the ambiguous set, why it joined (its `note`, e.g. "not
                  excluded: its fit is worse than `none` ...", or require_support's
                  `reason`: the chosen effect's interval holds the model's value)
