@@ -104,3 +104,17 @@ def test_a_row_keeps_why_each_member_joined_and_the_size_tests():
     assert row["size_excluded"] == ["mass_scale[ball]"]
     assert row["size_tests"] == tests
     assert row["excess_cut"] == 1.2 / 0.3
+
+
+def test_the_summary_counts_the_confirmations_on_the_left_out_windows():
+    """Tested, confirmed, and confirmed on the true effect (a pair holding it counts)."""
+    rows = [_row("mass_scale", "named", True), _row("mass_scale", "ambiguous", False, True),
+            _row("viscous_damping", "named", True), _row("none", "named", False),
+            _row("none", "named", True)]
+    conf = [("mass_scale[ball]", True), ("mass_scale[ball]", False),
+            ("contact_offset[ee_ball] + viscous_damping[ball]", True),
+            ("contact_offset[ee_ball]", True), None]
+    for r, c in zip(rows, conf):
+        r["confirmation"] = c and dict(name=c[0], confirmed=c[1], z_vs_none=2.5)
+    assert summarise(rows)["confirmations"] == dict(tested=4, confirmed=3,
+                                                    confirmed_the_truth=2)

@@ -115,7 +115,19 @@ def _summary(rows) -> dict:
                                                   if r in named_eff),
                             named_effect=sum(r in named_eff for r in v))
                     for k, v in sorted(per.items())},
+        confirmations=_confirmations(rows),
         targets=TARGETS)
+
+
+def _confirmations(rows) -> dict:
+    """How often a chosen effect was tested against `none` on the left-out windows
+    (engine/boundary.py confirm_on_left_out), confirmed, and confirmed while it held the
+    true effect (a pair counts when one of its members is the truth)."""
+    tested = [r for r in rows if r.get("confirmation")]
+    ok = [r for r in tested if r["confirmation"]["confirmed"]]
+    on_truth = [r for r in ok if _label(r["truth"]["name"], r["truth"]["target"]) in
+                r["confirmation"]["name"].split(" + ")]
+    return dict(tested=len(tested), confirmed=len(ok), confirmed_the_truth=len(on_truth))
 
 
 def answer_line(summary) -> str:
