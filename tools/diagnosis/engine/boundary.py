@@ -123,12 +123,9 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float) -> N
     if size_prob is None or chosen is None or len(amb) < 2 or \
             not any(a["name"] == "none" for a in amb) or amb[0]["name"] == "none":
         return
-    none_ssr, _, none_c, _ = size_none()
-    ssr, _, per_c, _ = evaluate(size_prob, chosen)
-    z = cluster_z(none_c, per_c, size_prob.z_stat)
-    ok = bool(z >= z_bar)
-    judged["confirmation"] = dict(name=chosen.label(), z_vs_none=float(z), confirmed=ok,
-                                  reduction=float(1.0 - ssr / none_ssr),
+    score = against_none(size_prob, chosen, size_none)
+    ok = bool(score["z_vs_none"] >= z_bar)
+    judged["confirmation"] = dict(name=chosen.label(), confirmed=ok, **score,
                                   windows=int(np.sum(size_prob.fold >= 0)))
     if not ok:
         return
@@ -143,19 +140,27 @@ def left_out_scores(judged, fits, size_prob, size_none) -> None:
     """Record, for each single-effect member of a set that holds `none`, its fit (fold
     values) against `none` on the left-out windows: judged["left_out"] = [{name,
     z_vs_none, reduction}]. A record for the report and the harness; no answer changes."""
-    from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     amb = judged.get("ambiguous") or []
     if size_prob is None or not any(a["name"] == "none" for a in amb):
         return
     by_label = {f.label(): f for f in fits if len(f.cands) == 1}
-    none_ssr, _, none_c, _ = size_none()
+    done = judged.get("confirmation") or {}      # the chosen fit, already scored there
     out = []
     for a in amb:
         f = by_label.get(f"{a['name']}[{a['target']}]" if a["target"] else a["name"])
         if a["name"] == "none" or f is None:
             continue
-        ssr, _, per_c, _ = evaluate(size_prob, f)
-        out.append(dict(name=f.label(), z_vs_none=float(cluster_z(none_c, per_c,
-                                                                   size_prob.z_stat)),
-                        reduction=float(1.0 - ssr / none_ssr)))
+        score = {k: done[k] for k in ("z_vs_none", "reduction")} \
+            if done.get("name") == f.label() else against_none(size_prob, f, size_none)
+        out.append(dict(name=f.label(), **score))
     judged["left_out"] = out
+
+
+def against_none(prob, fit, none_eval) -> dict:
+    """{z_vs_none, reduction} of `fit` (its fold values) against the unmodified model over
+    prob's held-out clusters; none_eval(): `none`'s evaluation there."""
+    from adaptive_c3.tools.diagnosis.engine.fit import evaluate
+    none_ssr, _, none_c, _ = none_eval()
+    ssr, _, per_c, _ = evaluate(prob, fit)
+    return dict(z_vs_none=float(cluster_z(none_c, per_c, prob.z_stat)),
+                reduction=float(1.0 - ssr / none_ssr))
