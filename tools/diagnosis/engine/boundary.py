@@ -118,7 +118,6 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float) -> N
     problem's cluster z; confirmed at z >= z_bar. The effect (or pair), its values and
     the windows are fixed before the test; nothing is fitted on them. Recorded as
     judged["confirmation"]; other members of the set stay."""
-    from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     amb = judged.get("ambiguous") or []
     if size_prob is None or chosen is None or len(amb) < 2 or \
             not any(a["name"] == "none" for a in amb) or amb[0]["name"] == "none":
@@ -143,11 +142,12 @@ def left_out_scores(judged, fits, size_prob, size_none) -> None:
     amb = judged.get("ambiguous") or []
     if size_prob is None or not any(a["name"] == "none" for a in amb):
         return
+    from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     by_label = {f.label(): f for f in fits if len(f.cands) == 1}
     done = judged.get("confirmation") or {}      # the chosen fit, already scored there
     out = []
     for a in amb:
-        f = by_label.get(f"{a['name']}[{a['target']}]" if a["target"] else a["name"])
+        f = by_label.get(Candidate(a["name"], a["target"]).label())
         if a["name"] == "none" or f is None:
             continue
         score = {k: done[k] for k in ("z_vs_none", "reduction")} \
