@@ -210,3 +210,27 @@ def test_cli_drake_diagnosis_names_a_table_offset_and_patches_the_drake_section(
     assert report["summary"].startswith("Model diagnosed: drake")
     patched = load_scenario(out / "patched_scenario.yaml")[0]
     assert patched.drake.table_height == pytest.approx(0.0035, abs=6e-4)
+
+
+def test_the_free_ball_fit_samples_the_free_windows(scenario):
+    """The free-ball effects' fit problem (diagnose.long_problem) holds about
+    `free_fit_windows` of the free windows (coasts and rests), spread evenly, and no
+    pushes; without that field every stride-th window, as the main fit."""
+    from adaptive_c3.tools.diagnosis.diagnose import long_problem
+    from adaptive_c3.tools.diagnosis.engine.evidence import (FREE_HORIZON, FREE_PHASES,
+                                                             window_phases)
+    rec, _, _ = _draw(scenario, 8004, "rolling_resistance", "ball_table")
+    spec = drake_ball_spec(scenario, workers=1)
+    prob = _problem(rec, spec, 40)
+    P0 = patch(spec, [])
+    sigma = estimate_noise(P0, make_windows(rec, 1))
+    free = np.isin(window_phases(spec, make_windows(rec, FREE_HORIZON)), FREE_PHASES)
+    assert free.sum() >= 8 and not free.all()
+    spec.free_fit_windows = int(free.sum()) // 4
+    dense = long_problem(rec, spec, prob, P0, sigma, stride=50)
+    phases = window_phases(spec, dense.windows)
+    assert np.all(np.isin(phases, FREE_PHASES))
+    assert abs(len(dense.windows) - spec.free_fit_windows) <= 1
+    spec.free_fit_windows = None
+    sparse = long_problem(rec, spec, prob, P0, sigma, stride=50)
+    assert len(sparse.windows) == -(-len(free) // 50)

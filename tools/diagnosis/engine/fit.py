@@ -234,14 +234,38 @@ def linear_refit(fit: Fit, keep=None, horizon: int | None = None) -> np.ndarray:
     return np.clip(fit.values + step, lo, hi)
 
 
+# a subset that leaves out more than this share of a parameter's information is refitted
+# by the model, not by one Gauss-Newton step (subset_refit)
+LINEAR_REFIT_MAX_DROP = 0.5
+
+
+def subset_refit(prob: Problem, fit: Fit, keep: np.ndarray) -> np.ndarray:
+    """The fit's values refitted on the used windows `keep` ([W] bool): by one Gauss-Newton
+    step from the all-data optimum on a costly model (linear_refit), unless the windows
+    left out hold more than LINEAR_REFIT_MAX_DROP of a parameter's information (sum of
+    squared sensitivities); then, as on a cheap model, by the model itself from the fit's
+    values. The step is a small-perturbation estimate: where one coast carries a
+    rolling resistance (development draw 90106, 3.7 mm: 99.8 % of the free windows'
+    information in one group of episodes), dropping it leaves the rests, whose error
+    is flat above the resistance that stops the ball, and the step from the coast's
+    optimum read 6.3 mm, which widened the jackknife's interval below 0."""
+    keep = np.asarray(keep, bool)
+    if _linear(prob):
+        Jt, shape = fit.lin[1], fit.lin[4]
+        info = np.sum(Jt.reshape((len(Jt), shape[0], -1)) ** 2, axis=2)       # [p, W]
+        dropped = info[:, ~keep].sum(axis=1) / np.maximum(info.sum(axis=1), 1e-300)
+        if np.all(dropped <= LINEAR_REFIT_MAX_DROP):
+            return linear_refit(fit, keep=keep)
+    return fit_candidates(prob, list(fit.cands), init=fit.values, ci=False,
+                          W=prob.used().take(keep)).values
+
+
 def cv_fit(prob: Problem, cands, init=None) -> Fit:
     """Fit on all the data (grid + LM), then once per fold without that fold."""
     fit = fit_candidates(prob, cands, init)
     used_fold = prob.fold[prob.fold >= 0]
     for k in prob.folds:
-        fit.fold_values[k] = (linear_refit(fit, keep=used_fold != k) if _linear(prob) else
-                              fit_candidates(prob, cands, init=fit.values, ci=False,
-                                             W=prob.train(k)).values)
+        fit.fold_values[k] = subset_refit(prob, fit, used_fold != k)
     return fit
 
 
@@ -269,9 +293,7 @@ def jackknife(prob: Problem, fit: Fit, groups: int = 8) -> Fit:
     ids = np.unique(gid)
     if len(ids) < 3:
         return fit
-    est = np.array([linear_refit(fit, keep=gid != g) if _linear(prob) else
-                    fit_candidates(prob, list(fit.cands), init=fit.values, ci=False,
-                                   W=W.take(gid != g)).values for g in ids])
+    est = np.array([subset_refit(prob, fit, gid != g) for g in ids])
     G = len(ids)
     sd_jk = np.sqrt((G - 1) / G * np.sum((est - est.mean(0)) ** 2, 0))
     shift = fit.shift if len(fit.shift) else np.zeros_like(fit.values)

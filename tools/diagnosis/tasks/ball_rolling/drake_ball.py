@@ -86,6 +86,8 @@ class DrakeBallSpec(BallSpec):
     forces: BallForceCoefficients = BallForceCoefficients()
     workers: int = 2
     fit_windows: int = FIT_WINDOWS
+    # the free-ball effects' fit: about this many of the free windows (diagnose.long_problem)
+    free_fit_windows: int = FIT_WINDOWS
     eval_stride: int = EVAL_STRIDE
     # LM's forward differences: 1 % of the range / 20 (SAP is solved to a tolerance;
     # 1e-4 of it, the LCS's, gave Jacobians of solver noise and LM stopped at its start)
