@@ -198,7 +198,9 @@ def long_problem(rec, spec, prob, P0, sigma, stride: int):
     free windows (coasts and rests) evenly: a costly model's sparse stride keeps about a
     third of its windows free, and a large rolling resistance stops the ball within a
     few of them (development draw 90106, 3.7 mm: 99 % of the fit's information in 4 of
-    33 free windows, so its jackknife interval reached 0)."""
+    33 free windows; its jackknife interval reached below 0). On development draws 90132
+    and 90228 (3.3 and 2.35 mm) the denser free windows named the resistance after one
+    follow-up, where the sparse ones left `none` beside it (docs/diagnosis.md)."""
     from adaptive_c3.tools.diagnosis.engine.evidence import FREE_HORIZON, FREE_PHASES
     if not getattr(spec, "free_ball", False):
         return None
