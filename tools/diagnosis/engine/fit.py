@@ -244,9 +244,10 @@ def subset_refit(prob: Problem, fit: Fit, keep: np.ndarray) -> np.ndarray:
     step from the all-data optimum on a costly model (linear_refit), unless the windows
     left out hold more than LINEAR_REFIT_MAX_DROP of a parameter's information (sum of
     squared sensitivities); then, as on a cheap model, by the model itself from the fit's
-    values. The step is a small-change estimate: from the optimum of the windows left out
-    it points by their curvature alone, and where the windows kept see the parameter
-    weakly or curved it can stop anywhere (tests/test_diagnose_subset_refit.py). Where
+    values. The step is a small-change estimate: it extrapolates the kept windows'
+    residuals linearly from the all-data optimum, and where those windows see the
+    parameter weakly or curved it stops short or overshoots (tests/test_diagnose_subset_
+    refit.py: halfway to the kept windows' optimum). Where
     one coast carries a rolling resistance (development draw 90106, 3.7 mm: 99.8 % of the
     free windows' information in one group of episodes) the model's refit without it
     read 6.2 mm and the step 6.3 mm: there the rests themselves prefer a larger value."""
