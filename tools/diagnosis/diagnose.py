@@ -209,12 +209,13 @@ def long_problem(rec, spec, prob, P0, sigma, stride: int):
     except ValueError:
         return None
     fold, _ = fold_ids(rec, W)
-    keep = np.arange(len(W)) % stride == 0
     target = getattr(spec, "free_fit_windows", None)
     if target:
         free = np.isin(window_phases(spec, W), FREE_PHASES)
         step = max(1, int(np.ceil(free.sum() / target)))
         keep = free & ((np.cumsum(free) - 1) % step == 0)
+    else:
+        keep = np.arange(len(W)) % stride == 0
     floor = prediction_floor(P0, sigma, FREE_HORIZON)
     return Problem(spec, list(prob.base), W.take(keep), fold[keep], fit_weight(spec) / floor)
 

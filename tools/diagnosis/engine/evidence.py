@@ -348,7 +348,8 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
     pinned down by the statistical interval (e.g. a compliant contact read as an offset).
     The pushes count as two phases, split at their median input force: a compliant
     contact gives under a firm push an offset (or friction) that a light push does not."""
-    from adaptive_c3.tools.diagnosis.engine.fit import add_to_interval, linear_refit
+    from adaptive_c3.tools.diagnosis.engine.fit import (add_to_interval, linear_refit,
+                                                        window_information)
     if fit is None or fit.lin is None:
         return fit
     W = prob.used()
@@ -358,8 +359,7 @@ def widen_for_phases(prob, fit, min_share: float = 0.05, min_windows: int = 30):
         force = np.linalg.norm(W.U, axis=2).mean(axis=1)
         firm = force > np.median(force[push])
         ph = np.where(push & firm, "push_firm", np.where(push, "push_light", ph))
-    Jt, shape = fit.lin[1], fit.lin[4]
-    info = np.sum(Jt.reshape((len(Jt), shape[0], -1)) ** 2, axis=(0, 2))     # [W]
+    info = window_information(fit).sum(axis=0)                           # [W]
     keep = [p for p in ("coast", "rest", "push", "push_light", "push_firm")
             if np.sum(ph == p) >= min_windows
             and info[ph == p].sum() >= min_share * info.sum()]

@@ -239,6 +239,13 @@ def linear_refit(fit: Fit, keep=None, horizon: int | None = None) -> np.ndarray:
 LINEAR_REFIT_MAX_DROP = 0.5
 
 
+def window_information(fit: Fit) -> np.ndarray:
+    """[p, W] each parameter's information per fit window: the sum of its squared
+    sensitivities (fit.lin's Jacobian) over the window's residuals."""
+    Jt, shape = fit.lin[1], fit.lin[4]
+    return np.sum(Jt.reshape((len(Jt), shape[0], -1)) ** 2, axis=2)
+
+
 def subset_refit(prob: Problem, fit: Fit, keep: np.ndarray) -> np.ndarray:
     """The fit's values refitted on the used windows `keep` ([W] bool): by one Gauss-Newton
     step from the all-data optimum on a costly model (linear_refit), unless the windows
@@ -253,8 +260,7 @@ def subset_refit(prob: Problem, fit: Fit, keep: np.ndarray) -> np.ndarray:
     read 6.2 mm and the step 6.3 mm: there the rests themselves prefer a larger value."""
     keep = np.asarray(keep, bool)
     if _linear(prob):
-        Jt, shape = fit.lin[1], fit.lin[4]
-        info = np.sum(Jt.reshape((len(Jt), shape[0], -1)) ** 2, axis=2)       # [p, W]
+        info = window_information(fit)
         dropped = info[:, ~keep].sum(axis=1) / np.maximum(info.sum(axis=1), 1e-300)
         if np.all(dropped <= LINEAR_REFIT_MAX_DROP):
             return linear_refit(fit, keep=keep)
