@@ -289,15 +289,19 @@ def widen_for_bias(prob: Problem, fit: Fit) -> Fit:
     return fit
 
 
+def jackknife_groups(W: Windows, groups: int = 8) -> np.ndarray:
+    """[W] the jackknife's group of each window: episodes dealt round-robin into `groups`
+    (time blocks when there are fewer than four episodes)."""
+    eps = np.unique(W.episode)
+    if len(eps) >= 4:
+        return np.searchsorted(eps, W.episode) % groups
+    return (np.arange(len(W)) * groups) // len(W)
+
+
 def jackknife(prob: Problem, fit: Fit, groups: int = 8) -> Fit:
     """Widen the chosen fit's interval with a delete-one-group jackknife over episodes
     (or time blocks) and the Student t quantile."""
-    W = prob.used()
-    eps = np.unique(W.episode)
-    if len(eps) >= 4:
-        gid = np.searchsorted(eps, W.episode) % groups
-    else:
-        gid = (np.arange(len(W)) * groups) // len(W)
+    gid = jackknife_groups(prob.used(), groups)
     ids = np.unique(gid)
     if len(ids) < 3:
         return fit
