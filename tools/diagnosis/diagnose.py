@@ -45,8 +45,8 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windo
                                                   window_phases)
 from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, evaluate,
                                              fit_nuisance, select, widen_for_nuisance)
-from adaptive_c3.tools.diagnosis.engine.boundary import (confirm_on_left_out, left_out_scores,
-                                                         size_test_problem)
+from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, confirm_on_left_out,
+                                                         left_out_scores, size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
@@ -285,6 +285,8 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                                               none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
+    if below_size(judged, spec, chosen, shift):      # there, but too small to matter
+        chosen = None
     es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
     left_out = size_test_problem(prob, WH, foldH, keep, es)
     left_none = functools.cache(lambda: evaluate(left_out, None))   # `none` there, once

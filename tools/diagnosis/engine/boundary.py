@@ -164,3 +164,38 @@ def against_none(prob, fit, none_eval) -> dict:
     ssr, _, per_c, _ = evaluate(prob, fit)
     return dict(z_vs_none=float(cluster_z(none_c, per_c, prob.z_stat)),
                 reduction=float(1.0 - ssr / none_ssr))
+
+
+def below_size(judged, spec, chosen, shift=None) -> bool:
+    """Turn a named effect too small to matter into `none`: True (and judged's verdict set
+    to "none", the finding kept as judged["below_size"]) when the chosen single effect's
+    physical 95 % interval (report.effect_params: through the model's measured model
+    form, an offset as the total from the user's model) lies wholly within its size that
+    matters (spec.relevant_size: (below, above) the nominal value). Such an effect is
+    there but changes nothing the user's model needs: on the eighteenth evaluation set a
+    clean draw whose table sat 0.17 mm off (a variation the draws give every recording)
+    was named a table offset of -0.16 mm [-0.45, -0.07] after its follow-up, a confident
+    wrong answer under the rule that too small to matter is a right `none`. An interval
+    that reaches the size keeps the name; so does a pair (its members' sizes are read
+    separately by require_support). The `none` that results is then checked as every
+    `none` is (not_excluded): effects whose intervals reach their sizes join it."""
+    from adaptive_c3.tools.diagnosis.engine.report import effect_params
+    sizes = getattr(spec, "relevant_size", None) or {}
+    if chosen is None or judged.get("verdict") != "named" or len(chosen.cands) != 1:
+        return False
+    c = chosen.cands[0]
+    size = sizes.get(c.label(), sizes.get(c.name))
+    params = effect_params(chosen, spec, shift)[0]["params"]
+    if size is None or len(params) != 1:
+        return False
+    nominal = float(c.nominal(spec)[0])
+    p = params[0]
+    lo, hi = p["ci95"]
+    if not (nominal - lo < size[0] and hi - nominal < size[1]):
+        return False
+    judged.update(verdict="none", ambiguous=[], separating_excitation=[])
+    judged["below_size"] = [dict(name=c.label(), value=float(p["value"]), unit=p["unit"],
+                                 ci95=[float(lo), float(hi)], nominal=nominal,
+                                 size=[float(s) for s in size])]
+    judged.pop("evidence", None)      # it described the dropped effect's gain
+    return True

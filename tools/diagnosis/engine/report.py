@@ -124,12 +124,14 @@ def _fmt(v):
 
 
 def _judged(result) -> dict:
-    """report.json's verdict, ambiguous set, separating excitation, evidence windows and
-    the sizes that matter tested directly (engine/boundary.py)."""
+    """report.json's verdict, ambiguous set, separating excitation, evidence windows, the
+    sizes that matter tested directly and an effect found within its size that matters
+    (engine/boundary.py)."""
     j = result.get("judged") or dict(verdict="none" if result["chosen"] is None else "named",
                                      ambiguous=[], separating_excitation=[])
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
-                              "size_tests", "confirmation", "left_out") if k in j}
+                              "size_tests", "confirmation", "left_out", "below_size")
+            if k in j}
 
 
 def ambiguity_summary(report) -> str:
@@ -146,6 +148,12 @@ def ambiguity_summary(report) -> str:
     if ruled:
         out += (f" Ruled out at the size that matters (the model fixed there is clearly "
                 f"worse than without it on held-out windows): {', '.join(ruled)}.")
+    for b in report.get("below_size", []):
+        lo, hi = b["ci95"]
+        out += (f" Found {b['name']} = {_fmt(b['value'])} {b['unit']} (95% interval "
+                f"{_fmt(lo)} to {_fmt(hi)}), within the size that matters (the model's "
+                f"{_fmt(b['nominal'])} -{_fmt(b['size'][0])}/+{_fmt(b['size'][1])}): there, "
+                f"but too small to change the model, so the verdict is `none`.")
     c = report.get("confirmation")
     if c and c["confirmed"]:
         out += (f" Confirmed on {c['windows']} held-out windows the fit never used: "

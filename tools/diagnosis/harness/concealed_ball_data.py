@@ -418,6 +418,7 @@ def judged_fields(result, truth) -> dict:
                 nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
                           for f in result.get("nuisance", [])],
                 size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]],
+                below_size=[x["name"] for x in j.get("below_size", [])],
                 size_tests=list(j.get("size_tests", [])),
                 confirmation=j.get("confirmation"), left_out=j.get("left_out"),
                 ambiguous_notes=[a.get("note") or a.get("reason", "")

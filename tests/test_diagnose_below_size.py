@@ -1,0 +1,83 @@
+"""Issue 30: an effect that is there but too small to matter is answered `none`
+(engine/boundary.py below_size): a named single effect whose whole physical 95 % interval
+lies within its size that matters (spec.relevant_size) turns the verdict into `none`; an
+interval that reaches the size keeps the name."""
+import numpy as np
+import pytest
+
+from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+from adaptive_c3.tools.diagnosis.engine.boundary import below_size
+from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+
+TABLE = Candidate("contact_offset", "ball_table")
+DRAG = Candidate("viscous_damping", "ball")
+MU = Candidate("friction_coefficient", "ee_ball")
+
+
+@pytest.fixture(scope="module")
+def spec():
+    return ball_spec(load_scenario(str(SCENARIO_DIR / "ball_rolling.yaml"))[0])
+
+
+def _fit(cands, values, ci):
+    from adaptive_c3.tools.diagnosis.engine.fit import Fit
+    ci = np.asarray(ci, float).reshape(len(values), 2)
+    return Fit(tuple(cands), np.asarray(values, float), ci,
+               (ci[:, 1] - ci[:, 0]) / (2 * 1.96), 0.0)
+
+
+def _named():
+    return dict(verdict="named", ambiguous=[], separating_excitation=[],
+                evidence=dict(windows=[]))
+
+
+@pytest.mark.parametrize("cand, value, ci", [
+    (TABLE, -0.16e-3, [-0.45e-3, -0.07e-3]),     # a 0.17 mm table error, found
+    (DRAG, 0.073, [0.060, 0.086]),               # a drag below its 0.1 N s/m
+    (MU, 0.7, [0.56, 0.84]),                     # a friction within 0.5 of the model's 1
+])
+def test_a_named_effect_within_its_size_is_answered_none(spec, cand, value, ci):
+    judged = _named()
+    assert below_size(judged, spec, _fit([cand], [value], [ci])) is True
+    assert judged["verdict"] == "none" and judged["ambiguous"] == []
+    assert "evidence" not in judged
+    found = judged["below_size"][0]
+    assert found["name"] == cand.label()
+    assert found["ci95"] == pytest.approx(ci)
+    text = ambiguity_summary(judged)
+    assert f"Found {cand.label()}" in text and "too small to change the model" in text
+
+
+@pytest.mark.parametrize("cand, value, ci", [
+    (TABLE, -0.6e-3, [-1.2e-3, -0.1e-3]),        # reaches -1 mm
+    (DRAG, 0.08, [0.04, 0.12]),                  # reaches 0.1
+    (MU, 0.6, [0.45, 0.75]),                     # reaches 0.5
+    (TABLE, 2.0e-3, [1.5e-3, 2.5e-3]),           # beyond it
+])
+def test_an_interval_that_reaches_the_size_keeps_the_name(spec, cand, value, ci):
+    judged = _named()
+    assert below_size(judged, spec, _fit([cand], [value], [ci])) is False
+    assert judged["verdict"] == "named" and "below_size" not in judged
+
+
+def test_the_offset_is_read_as_the_total_from_the_users_model(spec):
+    """A table offset fitted on top of a 0.9 mm calibration shift is a 1.0-1.4 mm offset
+    from the user's model: it matters, so it keeps its name (without the shift it would
+    not)."""
+    fit = _fit([TABLE], [0.3e-3], [[0.1e-3, 0.5e-3]])
+    judged = _named()
+    assert below_size(judged, spec, fit, shift={"ball_table": 0.9e-3}) is False
+    assert judged["verdict"] == "named"
+    assert below_size(_named(), spec, fit) is True
+
+
+def test_only_a_named_single_effect_is_read(spec):
+    small = ([TABLE], [-0.16e-3], [[-0.45e-3, -0.07e-3]])
+    amb = dict(_named(), verdict="ambiguous")
+    assert below_size(amb, spec, _fit(*small)) is False and amb["verdict"] == "ambiguous"
+    pair = _fit([TABLE, DRAG], [-0.16e-3, 0.07], [[-0.45e-3, -0.07e-3], [0.06, 0.086]])
+    judged = _named()
+    assert below_size(judged, spec, pair) is False and judged["verdict"] == "named"
+    assert below_size(_named(), spec, None) is False
