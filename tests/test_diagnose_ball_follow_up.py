@@ -173,7 +173,7 @@ def test_r_comp_with_a_calibration_sized_pair_is_no_choice():
     (draw 9039: a -2.33 mm table offset was named r_comp with 0.4 mm on the EE-ball pair)."""
     from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import score_draw
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-    from adaptive_c3.tools.diagnosis.engine.fit import _calibration_sized
+    from adaptive_c3.tools.diagnosis.engine.selection import _calibration_sized
     from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
     from adaptive_c3.tools.diagnosis.engine.fit import Fit

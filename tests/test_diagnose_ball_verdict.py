@@ -294,7 +294,7 @@ def test_a_pair_with_a_calibration_sized_offset_is_no_choice():
     the EE-ball pair: inside the +-1 mm calibration tolerance that part is calibration,
     as it is for r_comp; the table offset competes on its own."""
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
-    from adaptive_c3.tools.diagnosis.engine.fit import _calibration_sized
+    from adaptive_c3.tools.diagnosis.engine.selection import _calibration_sized
     spec = ball_spec(load_scenario(BALL)[0])
 
     def fit(cands, values):

@@ -5,7 +5,8 @@ import numpy as np
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.held_out import held_out_interval, widen_to_held_out
-from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, cv_fit, evaluate, score_fit
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, cv_fit, evaluate
+from adaptive_c3.tools.diagnosis.engine.selection import score_fit
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import Windows
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec

@@ -43,8 +43,8 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windo
                                                   free_ball_verdict, not_excluded, require_support,
                                                   top_pushes_only, widen_for_phases,
                                                   window_phases)
-from adaptive_c3.tools.diagnosis.engine.fit import (MIN_REDUCTION, Problem, evaluate,
-                                             fit_nuisance, select, widen_for_nuisance)
+from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
+from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, confirm_on_left_out,
                                                          left_out_scores, size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out

@@ -131,7 +131,8 @@ def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = 
     join `none`. The reduction test keeps out a rival that explains almost nothing: when
     the chosen gain sits in a few events (slips, contacts) the paired z cannot call even
     a 0.2 % cut worse than a 20 % one (development draw 90028)."""
-    from adaptive_c3.tools.diagnosis.engine.fit import cluster_z, reduction_bar
+    from adaptive_c3.tools.diagnosis.engine.fit import cluster_z
+    from adaptive_c3.tools.diagnosis.engine.selection import reduction_bar
     physical = [f for f in fits if len(f.cands) == 1 and f.physical]
     stats = ("paired",) if chosen is None or chosen.z_stat == "paired" else \
         ("paired", chosen.z_stat)
@@ -212,7 +213,7 @@ def free_ball_verdict(prob, cands, chosen, fits, none_eval, min_reduction: float
     joins the ambiguous set. A consistent push-phase choice stays, with the free-window
     effect added to its ambiguous set (each explains different windows). With no choice
     anywhere, free-window near misses (FREE_NEAR_REDUCTION) join `none` in the set."""
-    from adaptive_c3.tools.diagnosis.engine.fit import select
+    from adaptive_c3.tools.diagnosis.engine.selection import select
     gait = bool(getattr(prob.spec, "free_ball", False))     # the ball's push gait
     judged = verdict(fits, chosen, none_eval, min_reduction, gait=gait,
                      own_reduction=getattr(prob.spec, "min_reduction_by_effect", None))

@@ -1,6 +1,6 @@
 """The chosen effect re-estimated jointly with the calibration offsets kept as nuisance.
 
-Nuisances are fitted first, before any effect (fit.fit_nuisance), and each candidate is
+Nuisances are fitted first, before any effect (selection.fit_nuisance), and each candidate is
 then fitted with them held. Where a calibration offset and the effect move the same
 quantity, the calibration takes up part of the effect and the effect's fit keeps only
 the rest: a table raised by c lifts a pressed ball, and so the EE over it, as an EE-ball
@@ -34,7 +34,8 @@ import numpy as np
 from scipy.optimize import minimize
 
 from adaptive_c3.tools.diagnosis.engine.fit import (Fit, Problem, _jacobian, _sandwich_sd,
-                                                    _split, bounds_of, score_fit)
+                                                    _split, bounds_of)
+from adaptive_c3.tools.diagnosis.engine.selection import score_fit
 
 SIMPLEX_STEP = 0.5           # the first simplex: this share of each value_scale
 X_TOL = 0.05                 # ... stop when it is this small (in those steps)
