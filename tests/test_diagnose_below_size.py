@@ -73,11 +73,48 @@ def test_the_offset_is_read_as_the_total_from_the_users_model(spec):
     assert below_size(_named(), spec, fit) is True
 
 
-def test_only_a_named_single_effect_is_read(spec):
-    small = ([TABLE], [-0.16e-3], [[-0.45e-3, -0.07e-3]])
-    amb = dict(_named(), verdict="ambiguous")
-    assert below_size(amb, spec, _fit(*small)) is False and amb["verdict"] == "ambiguous"
+RR = Candidate("rolling_resistance", "ball_table")
+
+
+def _ambiguous(*fits, with_none=False):
+    rows = [dict(name=f.cands[0].name if len(f.cands) == 1 else f.label(),
+                 target=f.cands[0].target if len(f.cands) == 1 else "",
+                 values=[float(v) for v in f.values]) for f in fits]
+    if with_none:
+        rows.insert(1, dict(name="none", target=""))
+    return dict(verdict="ambiguous", ambiguous=rows, separating_excitation=[{}])
+
+
+def test_an_ambiguous_set_of_effects_within_their_sizes_is_none(spec):
+    """Development draw 90251 (drag 0.084, below its 0.1): drag and rolling resistance
+    left in a set; each within its size, so the answer is `none`."""
+    drag = _fit([DRAG], [0.083], [[0.074, 0.093]])
+    rr = _fit([RR], [2.0e-4], [[1.2e-4, 2.8e-4]])
+    other = _fit([RR], [9.0e-4], [[7.0e-4, 1.1e-3]])      # same label, other values
+    judged = _ambiguous(drag, rr, with_none=True)
+    assert below_size(judged, spec, drag, [other, rr]) is True
+    assert judged["verdict"] == "none" and judged["ambiguous"] == []
+    assert [b["name"] for b in judged["below_size"]] == [DRAG.label(), RR.label()]
+    assert judged["below_size"][1]["value"] == pytest.approx(2.0e-4)
+    # with no chosen fit (a `none` with a near miss beside it) the same
+    assert below_size(_ambiguous(rr, with_none=True), spec, None, [rr]) is True
+
+
+def test_one_member_that_matters_keeps_the_set(spec):
+    drag = _fit([DRAG], [0.083], [[0.074, 0.093]])
+    rr = _fit([RR], [4.0e-4], [[2.0e-4, 6.0e-4]])          # reaches 0.5 mm
+    judged = _ambiguous(drag, rr)
+    assert below_size(judged, spec, drag, [rr]) is False and judged["verdict"] == "ambiguous"
+    pair = _fit([TABLE, DRAG], [-0.16e-3, 0.07], [[-0.45e-3, -0.07e-3], [0.06, 0.086]])
+    judged = _ambiguous(drag, pair)
+    assert below_size(judged, spec, drag, [pair]) is False
+    judged = _ambiguous(drag, rr)                      # a member whose fit is not given
+    assert below_size(judged, spec, drag, []) is False
+
+
+def test_only_a_single_effect_is_read(spec):
     pair = _fit([TABLE, DRAG], [-0.16e-3, 0.07], [[-0.45e-3, -0.07e-3], [0.06, 0.086]])
     judged = _named()
     assert below_size(judged, spec, pair) is False and judged["verdict"] == "named"
     assert below_size(_named(), spec, None) is False
+    assert below_size(dict(_named(), verdict="none"), spec, None) is False

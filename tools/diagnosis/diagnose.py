@@ -285,7 +285,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                                               none_scored[3] - chosen.test_window_ssr,
                                               chosen.cands[0].name)
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
-    if below_size(judged, spec, chosen, shift):      # there, but too small to matter
+    if below_size(judged, spec, chosen, [*fits_free, *fits], shift):    # too small to matter
         chosen = None
     es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
     left_out = size_test_problem(prob, WH, foldH, keep, es)

@@ -166,36 +166,67 @@ def against_none(prob, fit, none_eval) -> dict:
                 reduction=float(1.0 - ssr / none_ssr))
 
 
-def below_size(judged, spec, chosen, shift=None) -> bool:
-    """Turn a named effect too small to matter into `none`: True (and judged's verdict set
-    to "none", the finding kept as judged["below_size"]) when the chosen single effect's
-    physical 95 % interval (report.effect_params: through the model's measured model
-    form, an offset as the total from the user's model) lies wholly within its size that
-    matters (spec.relevant_size: (below, above) the nominal value). Such an effect is
-    there but changes nothing the user's model needs: on the eighteenth evaluation set a
-    clean draw whose table sat 0.17 mm off (a variation the draws give every recording)
-    was named a table offset of -0.16 mm [-0.45, -0.07] after its follow-up, a confident
-    wrong answer under the rule that too small to matter is a right `none`. An interval
-    that reaches the size keeps the name; so does a pair (its members' sizes are read
-    separately by require_support). The `none` that results is then checked as every
-    `none` is (not_excluded): effects whose intervals reach their sizes join it."""
+def within_size(spec, fit, shift=None) -> dict | None:
+    """The finding {name, value, unit, ci95, nominal, size} when `fit`, a single effect
+    with one parameter and a size that matters (spec.relevant_size: (below, above) the
+    nominal value), has its whole physical 95 % interval (report.effect_params: through
+    the model's measured model form, an offset as the total from the user's model)
+    within that size; else None."""
     from adaptive_c3.tools.diagnosis.engine.report import effect_params
     sizes = getattr(spec, "relevant_size", None) or {}
-    if chosen is None or judged.get("verdict") != "named" or len(chosen.cands) != 1:
-        return False
-    c = chosen.cands[0]
+    if fit is None or len(fit.cands) != 1:
+        return None
+    c = fit.cands[0]
     size = sizes.get(c.label(), sizes.get(c.name))
-    params = effect_params(chosen, spec, shift)[0]["params"]
+    params = effect_params(fit, spec, shift)[0]["params"]
     if size is None or len(params) != 1:
-        return False
+        return None
     nominal = float(c.nominal(spec)[0])
     p = params[0]
-    lo, hi = p["ci95"]
+    lo, hi = (float(v) for v in p["ci95"])
     if not (nominal - lo < size[0] and hi - nominal < size[1]):
+        return None
+    return dict(name=c.label(), value=float(p["value"]), unit=p["unit"], ci95=[lo, hi],
+                nominal=nominal, size=[float(v) for v in size])
+
+
+def _member_fit(row, fits):
+    """The fit behind an ambiguous set's row: the single effect of that label whose values
+    are the row's (a free-ball effect has a fit on all windows and one on the free ones)."""
+    for f in fits:
+        if len(f.cands) == 1 and (f.cands[0].name, f.cands[0].target) == \
+                (row["name"], row["target"]) and \
+                np.allclose(f.values, row.get("values", []), rtol=1e-9, atol=0.0):
+            return f
+    return None
+
+
+def below_size(judged, spec, chosen, fits=(), shift=None) -> bool:
+    """Turn an answer whose every effect is too small to matter into `none`: True (and
+    judged's verdict set to "none", the findings kept as judged["below_size"]) when the
+    named single effect, or each effect of an ambiguous set (`fits`: the fits its rows
+    came from), has its whole physical 95 % interval within its size that matters
+    (within_size). Such an effect is there but changes nothing the user's model needs:
+    on the eighteenth evaluation set a clean draw whose table sat 0.17 mm off (a
+    variation the draws give every recording) was named a table offset of -0.16 mm
+    [-0.45, -0.07] after its follow-up, a confident wrong answer under the rule that too
+    small to matter is a right `none`; on development draw 90251 (drag 0.084 N s/m,
+    below its 0.1) the follow-up left drag 0.083 [0.074, 0.093] and rolling resistance
+    in a set. One interval that reaches its size keeps the answer, and so does a pair
+    (its members' sizes are read separately by require_support). The `none` that results
+    is then checked as every `none` is (not_excluded): effects whose intervals reach
+    their sizes join it."""
+    if judged.get("verdict") == "named" and chosen is not None:
+        members = [chosen]
+    elif judged.get("verdict") == "ambiguous":
+        rows = [a for a in judged["ambiguous"] if a["name"] != "none"]
+        members = [_member_fit(a, [f for f in (chosen, *fits) if f is not None])
+                   for a in rows]
+    else:
         return False
-    judged.update(verdict="none", ambiguous=[], separating_excitation=[])
-    judged["below_size"] = [dict(name=c.label(), value=float(p["value"]), unit=p["unit"],
-                                 ci95=[float(lo), float(hi)], nominal=nominal,
-                                 size=[float(s) for s in size])]
+    found = [within_size(spec, f, shift) for f in members]
+    if not found or any(x is None for x in found):
+        return False
+    judged.update(verdict="none", ambiguous=[], separating_excitation=[], below_size=found)
     judged.pop("evidence", None)      # it described the dropped effect's gain
     return True

@@ -25,8 +25,9 @@ diagnosed and scored:
   size_tests     every such test: the effect, the sizes tried and their z against `none`
   confirmation   the chosen effect against `none` on the windows the fit left out, where
                  `none` had joined it (engine/boundary.py confirm_on_left_out)
-  below_size     the chosen effect whose whole interval lay within its size that matters,
-                 answered `none` instead (engine/boundary.py below_size)
+  below_size     the effect(s) of an answer (named, or an ambiguous set) whose every
+                 interval lay within its size that matters, answered `none` instead
+                 (engine/boundary.py below_size)
   left_out       each single member beside `none`: its own fit against `none` there
                  (a record; no answer depends on it)
   ambiguous_notes  per member of the ambiguous set, why it joined (its `note`, e.g. "not
@@ -118,7 +119,7 @@ def _summary(rows) -> dict:
                             named_effect=sum(r in named_eff for r in v))
                     for k, v in sorted(per.items())},
         confirmations=_confirmations(rows),
-        # a named effect within its size that matters turned into `none` (boundary.below_size)
+        # answers within their sizes that matter turned into `none` (boundary.below_size)
         within_size_to_none=count(lambda r: r.get("below_size")),
         targets=TARGETS)
 
