@@ -1,7 +1,8 @@
 """Issue 30: an effect that is there but too small to matter is answered `none`
-(engine/boundary.py below_size): a named single effect whose whole physical 95 % interval
-lies within its size that matters (spec.relevant_size) turns the verdict into `none`; an
-interval that reaches the size keeps the name."""
+(engine/boundary.py below_size): a named single effect, or an ambiguous set of single
+effects, whose every physical 95 % interval lies within its size that matters
+(spec.relevant_size) turns the verdict into `none`; one interval that reaches its size
+keeps the answer."""
 import numpy as np
 import pytest
 

@@ -166,6 +166,13 @@ def against_none(prob, fit, none_eval) -> dict:
                 reduction=float(1.0 - ssr / none_ssr))
 
 
+def size_that_matters(spec, cand):
+    """(below, above) the nominal value: the size of `cand` that matters
+    (spec.relevant_size, by the effect's label, else its name), or None."""
+    sizes = getattr(spec, "relevant_size", None) or {}
+    return sizes.get(cand.label(), sizes.get(cand.name))
+
+
 def within_size(spec, fit, shift=None) -> dict | None:
     """The finding {name, value, unit, ci95, nominal, size} when `fit`, a single effect
     with one parameter and a size that matters (spec.relevant_size: (below, above) the
@@ -173,11 +180,10 @@ def within_size(spec, fit, shift=None) -> dict | None:
     the model's measured model form, an offset as the total from the user's model)
     within that size; else None."""
     from adaptive_c3.tools.diagnosis.engine.report import effect_params
-    sizes = getattr(spec, "relevant_size", None) or {}
     if fit is None or len(fit.cands) != 1:
         return None
     c = fit.cands[0]
-    size = sizes.get(c.label(), sizes.get(c.name))
+    size = size_that_matters(spec, c)
     params = effect_params(fit, spec, shift)[0]["params"]
     if size is None or len(params) != 1:
         return None

@@ -285,12 +285,12 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     size_prob: where the size tests are scored (boundary.size_test_problem; default
     prob); size_none: a callable giving `none`'s evaluation there (computed once)."""
     from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, size_sides,
+                                                            size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
-    sizes = getattr(spec, "relevant_size", None) or {}
     shift = shift or {}
-    if not sizes or not (judged["verdict"] == "none"
+    if not getattr(spec, "relevant_size", None) or not (judged["verdict"] == "none"
                          or any(a["name"] == "none" for a in judged["ambiguous"])):
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
@@ -300,7 +300,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     mf = getattr(spec, "model_form_bias", None) or {}
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
-        size = sizes.get(c.label(), sizes.get(c.name))
+        size = size_that_matters(spec, c)
         if size is None:
             continue
         where = " (the interval from the free windows)" if f.cands in free else ""

@@ -35,7 +35,6 @@ from adaptive_c3.tools.diagnosis.backends.effects import Candidate, patch, rollo
 from adaptive_c3.tools.diagnosis.engine.locate import LAG, Windows
 
 
-
 @dataclass
 class Problem:
     spec: object

@@ -379,11 +379,11 @@ def matters(truth: Truth, spec) -> bool:
     (spec.relevant_size: (below, above) the nominal value, as the verdict's `none` rule
     reads it); `none`, and an effect without a listed size, always count as mattering."""
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+    from adaptive_c3.tools.diagnosis.engine.boundary import size_that_matters
     if truth.name == "none":
         return True
     c = Candidate(truth.name, truth.target)
-    sizes = getattr(spec, "relevant_size", None) or {}
-    size = sizes.get(c.label(), sizes.get(c.name))
+    size = size_that_matters(spec, c)
     if size is None:
         return True
     dev = truth.value - float(c.nominal(spec)[0])
