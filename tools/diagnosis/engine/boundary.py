@@ -173,6 +173,11 @@ def size_that_matters(spec, cand):
     return sizes.get(cand.label(), sizes.get(cand.name))
 
 
+def reaches_size(size, nominal: float, lo: float, hi: float) -> bool:
+    """Whether [lo, hi] reaches the size that matters, (below, above) the nominal value."""
+    return nominal - lo >= size[0] or hi - nominal >= size[1]
+
+
 def within_size(spec, fit, shift=None) -> dict | None:
     """The finding {name, value, unit, ci95, nominal, size} when `fit`, a single effect
     with one parameter and a size that matters (spec.relevant_size: (below, above) the
@@ -184,13 +189,12 @@ def within_size(spec, fit, shift=None) -> dict | None:
         return None
     c = fit.cands[0]
     size = size_that_matters(spec, c)
-    params = effect_params(fit, spec, shift)[0]["params"]
-    if size is None or len(params) != 1:
+    if size is None or len(fit.values) != 1:
         return None
+    p = effect_params(fit, spec, shift)[0]["params"][0]
     nominal = float(c.nominal(spec)[0])
-    p = params[0]
     lo, hi = (float(v) for v in p["ci95"])
-    if not (nominal - lo < size[0] and hi - nominal < size[1]):
+    if reaches_size(size, nominal, lo, hi):
         return None
     return dict(name=c.label(), value=float(p["value"]), unit=p["unit"], ci95=[lo, hi],
                 nominal=nominal, size=[float(v) for v in size])

@@ -284,8 +284,8 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     unread and the sizes that matter tested directly (boundary.untrusted_interval).
     size_prob: where the size tests are scored (boundary.size_test_problem; default
     prob); size_none: a callable giving `none`'s evaluation there (computed once)."""
-    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, size_sides,
-                                                            size_that_matters,
+    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, reaches_size,
+                                                            size_sides, size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
@@ -311,7 +311,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
         direct = add == 0.0 and c.label() not in mf
-        reaches = nominal - lo >= size[0] or hi - nominal >= size[1]
+        reaches = reaches_size(size, nominal, lo, hi)
         untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob)
         if not (reaches or untrusted):
             continue

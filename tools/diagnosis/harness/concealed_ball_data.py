@@ -379,15 +379,14 @@ def matters(truth: Truth, spec) -> bool:
     (spec.relevant_size: (below, above) the nominal value, as the verdict's `none` rule
     reads it); `none`, and an effect without a listed size, always count as mattering."""
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-    from adaptive_c3.tools.diagnosis.engine.boundary import size_that_matters
+    from adaptive_c3.tools.diagnosis.engine.boundary import reaches_size, size_that_matters
     if truth.name == "none":
         return True
     c = Candidate(truth.name, truth.target)
     size = size_that_matters(spec, c)
     if size is None:
         return True
-    dev = truth.value - float(c.nominal(spec)[0])
-    return bool(-dev >= size[0] or dev >= size[1])
+    return bool(reaches_size(size, float(c.nominal(spec)[0]), truth.value, truth.value))
 
 
 def apply_size_rule(row, truth: Truth, spec) -> dict:
