@@ -163,7 +163,7 @@ def test_running_the_proposed_coast_separates_drag_from_rolling_resistance():
     assert r["truth"]["name"] == "viscous_damping"
     assert r["verdict"] == "ambiguous" and "viscous_damping[ball]" in r["ambiguous"]
     f = r["follow_up"]
-    assert f["excitation"]["release_speed"][0] >= 0.1
+    assert f["excitation"]["release_speed"][1] >= 0.2          # release pushes: coasts
     assert f["named"] and f["in_interval"], f["selected"]
 
 
@@ -296,3 +296,25 @@ def test_a_model_without_side_contact_is_proposed_top_pushes_not_strikes():
     assert "instead of strikes" in fric["change"]
     assert judged["separating_excitation"][1] == coast
     Excitation().changed(**fric["excitation"])
+
+
+def test_the_drag_resistance_proposal_coasts_the_ball_from_slow_to_fast():
+    """A constant deceleration and one in proportion to speed part where slow and fast
+    coasts sit side by side (engine/proposals.py SPEED_RANGE): the gait the proposal asks
+    for really lets the ball go at speeds across 0.05-0.3 m/s, clear of the EE."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import SEPARATING, against_none
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
+    _, change = SEPARATING[frozenset({"rolling_resistance", "viscous_damping"})]
+    assert against_none("viscous_damping")[1]["release_speed"] == change["release_speed"]
+    rec, _, clean = concealed_draw(5, name="none", follow_up=dict(change, episodes=16))
+    released = []
+    for _, idx in rec.episodes():
+        x = clean[idx]
+        gap = np.linalg.norm(x[:, 0:3] - x[:, 7:10], axis=1)
+        last_touch = np.flatnonzero(gap < gap.min() + 0.002)[-1]
+        free = np.flatnonzero(gap > gap.min() + 0.02)      # the EE well clear of the ball
+        free = free[free > last_touch]                     # after the push's lift-off
+        if len(free):
+            released.append(np.linalg.norm(x[free[0], 16:18]))
+    assert len(released) >= 12, released
+    assert min(released) < 0.1 and max(released) > 0.25, released
