@@ -318,3 +318,36 @@ def test_the_drag_resistance_proposal_coasts_the_ball_from_slow_to_fast():
             released.append(np.linalg.norm(x[free[0], 16:18]))
     assert len(released) >= 12, released
     assert min(released) < 0.1 and max(released) > 0.25, released
+
+
+@pytest.mark.slow
+def test_coasts_from_slow_to_fast_tell_a_drag_from_rolling_resistance():
+    """Development draw 90216 (a drag of 0.094 N s/m, Drake's plant as the model): after a
+    follow-up of 25 episodes, half of them glancing strikes, whose release pushes let the
+    ball go at 0.1-0.2 m/s, drag and rolling resistance stay in one ambiguous set; with the
+    same follow-up releasing at 0.05-0.3 m/s (SPEED_RANGE) the drag is named."""
+    from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+    from adaptive_c3.tools.diagnosis.diagnose import diagnose
+    from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import concealed_draw
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball import drake_ball_spec
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
+    scenario, _ = load_scenario(SCENARIO_DIR / "ball_rolling.yaml")
+    params = ModelParams.from_scenario(scenario)
+    rec, truth, _ = concealed_draw(90216, params=params)
+    assert truth.name == "viscous_damping"
+
+    def answer(release):
+        change = dict(episodes=25, duration_s=2.4, strike_fraction=0.5, release_speed=release)
+        rec2, _, _ = concealed_draw(90216, params=params, follow_up=change)
+        spec = drake_ball_spec(scenario)
+        try:
+            res = diagnose(concat_recordings([rec, rec2]), spec, progress=False)
+        finally:
+            spec.close()
+        judged = res["judged"]
+        return (judged["verdict"], [a["name"] for a in judged.get("ambiguous", [])],
+                res["chosen"].label() if res["chosen"] is not None else None)
+    verdict, members, _ = answer([0.1, 0.2])
+    assert verdict == "ambiguous"
+    assert {"viscous_damping", "rolling_resistance"} <= set(members)
+    assert answer([0.05, 0.3]) == ("named", [], "viscous_damping[ball]")
