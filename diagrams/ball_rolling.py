@@ -40,7 +40,7 @@ from adaptive_c3.systems.contact.anitescu_lcs_system import AnitescuLcsSystem
 from adaptive_c3.systems.perception.ball_pose_sensor import BallPoseSensor
 from adaptive_c3.systems.rolling.estimator import BallRollingEstimator
 from adaptive_c3.systems.rolling.planner import BallRollingPlanner
-from adaptive_c3.systems.c3.solver import C3Options
+from adaptive_c3.systems.c3.options import C3Options
 from adaptive_c3.systems.learning.residual_learner import ResidualLearner
 from adaptive_c3.systems.learning.violation_loss import LearnerOptions
 

@@ -51,7 +51,7 @@ def cartpole_models(s: CartpoleScenario) -> tuple[Lcs, Lcs]:
 
 
 def cartpole_c3_options(s: CartpoleScenario):
-    from adaptive_c3.systems.c3.solver import C3Options
+    from adaptive_c3.systems.c3.options import C3Options
     c = s.c3
     return C3Options.from_dict(dict(
         horizon=c.horizon, admm_iter=c.admm_iter, projection=c.projection,

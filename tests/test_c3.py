@@ -4,8 +4,10 @@ import pytest
 import scipy.linalg
 
 from adaptive_c3.models.cartpole import cartpole_lcs
-from adaptive_c3.systems.c3.solver import C3Options, C3Solver, cartpole_c3_options
-from adaptive_c3.systems.c3.qp import DrakeOsqpQp, KktQp, OsqpQp, QpStepData
+from adaptive_c3.systems.c3.options import C3Options, cartpole_c3_options
+from adaptive_c3.systems.c3.solver import C3Solver
+from adaptive_c3.systems.c3.qp import KktQp, OsqpQp, QpStepData
+from adaptive_c3.systems.c3.qp_sparse import DrakeOsqpQp
 from adaptive_c3.systems.contact.lcs import LcsSequence
 from adaptive_c3.tools.bench.c3 import ballroll_c3_options, random_ballroll_lcs
 

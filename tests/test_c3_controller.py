@@ -8,7 +8,8 @@ from pydrake.systems.primitives import (ConstantValueSource, ConstantVectorSourc
                                         LogVectorOutput)
 
 from adaptive_c3.models.cartpole import cartpole_lcs
-from adaptive_c3.systems.c3.solver import C3Solution, cartpole_c3_options
+from adaptive_c3.systems.c3.options import cartpole_c3_options
+from adaptive_c3.systems.c3.solver import C3Solution
 from adaptive_c3.systems.c3.controller import C3Controller
 from adaptive_c3.systems.contact.lcs import LcsSequence
 from adaptive_c3.systems.contact.lcs_plant import LcsPlant

@@ -4,7 +4,8 @@ import numpy as np
 
 from adaptive_c3.models.cartpole import cartpole_lcs
 from adaptive_c3.systems.c3.projection import QpProjector
-from adaptive_c3.systems.c3.solver import FALLBACKS, C3Solver, cartpole_c3_options
+from adaptive_c3.systems.c3.options import cartpole_c3_options
+from adaptive_c3.systems.c3.solver import FALLBACKS, C3Solver
 from adaptive_c3.systems.contact.lcs import Lcs
 
 X0 = np.array([0.1, -0.3, 0.0, 0.0])

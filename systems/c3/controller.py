@@ -7,7 +7,8 @@ import numpy as np
 from pydrake.common.value import AbstractValue
 from pydrake.systems.framework import EventStatus, LeafSystem
 
-from adaptive_c3.systems.c3.solver import C3Options, C3Solver
+from adaptive_c3.systems.c3.options import C3Options
+from adaptive_c3.systems.c3.solver import C3Solver
 from adaptive_c3.systems.contact.lcs import Lcs, LcsSequence
 
 __all__ = ["C3Controller"]

@@ -50,7 +50,8 @@ from adaptive_c3.models.ball_rolling_controller_model import (BALL_ANGVEL, BALL_
                                                               BALL_QUAT, BALL_VEL, EE_POS,
                                                               EE_VEL)
 from adaptive_c3.models.rigid_object import quaternion_rate
-from adaptive_c3.systems.c3.solver import C3Options, C3Solver
+from adaptive_c3.systems.c3.options import C3Options
+from adaptive_c3.systems.c3.solver import C3Solver
 from adaptive_c3.systems.contact.lcs import Lcs
 from adaptive_c3.systems.rolling.gait import (PHASES, RollingGait, clamp_ee_command,
                                               step_toward)

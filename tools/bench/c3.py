@@ -21,7 +21,8 @@ import numpy as np
 import scipy.linalg
 
 from adaptive_c3.models.cartpole import cartpole_lcs
-from adaptive_c3.systems.c3.solver import C3Options, C3Solver, cartpole_c3_options
+from adaptive_c3.systems.c3.options import C3Options, cartpole_c3_options
+from adaptive_c3.systems.c3.solver import C3Solver
 from adaptive_c3.systems.c3.projection import project_c3plus
 from adaptive_c3.systems.c3.qp import silenced_c_stdout
 from adaptive_c3.systems.contact.lcp import solve_lcp
