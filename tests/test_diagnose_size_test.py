@@ -161,10 +161,11 @@ class ScaledSlipProblem(SlipProblem):
 
 def test_the_size_bar_is_one_test_per_effect():
     """A `none` is wrong only when the one effect present was excluded, so each effect's
-    size test runs at 5 % alone (evidence.size_z, Z_AMBIG): mu 0.5 scoring a z between
-    2.0 and the Bonferroni bar over the sized effects is excluded however many other sized
-    effects were fitted (the old bar, worse_z over them, kept it in the set)."""
-    from adaptive_c3.tools.diagnosis.engine.evidence import Z_AMBIG, size_z, worse_z
+    size test runs at 5 % alone (evidence.size_z, the one-sided 5 % point): mu 0.5
+    scoring a z between 2.0 and the Bonferroni bar over the sized effects is excluded
+    however many other sized effects were fitted (the old bar, worse_z over them, kept it
+    in the set)."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import size_z, worse_z
     spec = _spec()
     prob = ScaledSlipProblem(spec, truth_mu=1.0, gain=0.028)
     fric, none_eval = _fric_fit(prob, 0.9, [0.2, 1.6])
@@ -174,10 +175,26 @@ def test_the_size_bar_is_one_test_per_effect():
                       ("viscous_damping", "ball", 0.0), ("rolling_resistance", "ball_table", 0.0),
                       ("external_force", "ball_x", 0.0), ("external_force", "ball_y", 0.0),
                       ("contact_offset", "ee_ball", 0.0), ("mass_scale", "ball", 1.0))]
-    assert size_z() == Z_AMBIG
+    assert abs(size_z() - 1.645) < 1e-3
     assert -worse_z(1 + len(others)) < z < -size_z()        # between the two bars
     judged = verdict([fric], None, none_eval, 0.1)
     not_excluded(judged, spec, [fric] + others, none_eval, prob=prob)
+    assert judged["verdict"] == "none" and judged["ambiguous"] == []
+    assert judged["size_tests"][0]["excluded"] is True
+
+
+def test_the_size_bar_is_the_one_sided_five_percent_point():
+    """mu 0.5 scoring a z between -2.0 (the rival rule's floor Z_AMBIG) and -1.645 on
+    clean data is excluded: nothing was fitted where the size is tested, so the single
+    test's 5 % bounds a wrong `none` (evidence.size_z)."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import Z_AMBIG
+    spec = _spec()
+    prob = ScaledSlipProblem(spec, truth_mu=1.0, gain=0.022)
+    fric, none_eval = _fric_fit(prob, 0.9, [0.2, 1.6])
+    z = at_size(prob, FRICTION, 0.5, none_eval)
+    assert -Z_AMBIG < z < -1.645
+    judged = verdict([fric], None, none_eval, 0.1)
+    not_excluded(judged, spec, [fric], none_eval, prob=prob)
     assert judged["verdict"] == "none" and judged["ambiguous"] == []
     assert judged["size_tests"][0]["excluded"] is True
 

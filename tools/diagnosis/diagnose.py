@@ -45,7 +45,8 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windo
                                                   window_phases)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
-from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, confirm_on_left_out,
+from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
+                                                         confirm_on_left_out,
                                                          left_out_scores, size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
@@ -277,13 +278,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if chosen is not None:
         # widened on the windows it was judged on: for a free-ball choice the free ones,
         # since over the pushes the nuisances loosen a drag's interval until it holds 0
-        widen_for_phases(scored, chosen)
-        widen_for_nuisance(scored, chosen, user_base, nuisance)
-        widen_to_held_out(scored, chosen)
-        Wu = scored.used()
-        judged["evidence"] = evidence_windows(spec, Wu, window_phases(spec, Wu),
-                                              none_scored[3] - chosen.test_window_ssr,
-                                              chosen.cands[0].name)
+        widen(scored, none_scored, chosen, judged, user_base, nuisance)
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
     if below_size(judged, spec, chosen, [*fits_free, *fits], shift):    # too small to matter
         chosen = None
@@ -294,6 +289,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG)
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
                  size_prob=left_out, size_none=left_none)
+    shown = beyond_size(judged, spec, fits, left_out, left_none, shift)
+    if shown is not None and shown is not chosen:     # named: beyond its size there
+        chosen = shown
+        widen(prob, none_eval, chosen, judged, user_base, nuisance)
     left_out_scores(judged, fits, left_out, left_none)
     if not getattr(spec, "side_contact", False):
         top_pushes_only(judged)
@@ -327,6 +326,19 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                 contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
                 nuisance=nuisance, fits_free=fits_free, **backend_fields(spec, chosen),
                 seconds=time.perf_counter() - start)
+
+
+def widen(scored, none_scored, chosen, judged, user_base, nuisance) -> None:
+    """The chosen fit's interval widened for what the statistical one leaves out (its
+    phases, the nuisances, the held-out spread) on the windows `scored` it was judged on,
+    and judged["evidence"]: where its held-out gain sits."""
+    widen_for_phases(scored, chosen)
+    widen_for_nuisance(scored, chosen, user_base, nuisance)
+    widen_to_held_out(scored, chosen)
+    Wu = scored.used()
+    judged["evidence"] = evidence_windows(scored.spec, Wu, window_phases(scored.spec, Wu),
+                                          none_scored[3] - chosen.test_window_ssr,
+                                          chosen.cands[0].name)
 
 
 def backend_fields(spec, chosen) -> dict:

@@ -130,7 +130,8 @@ def _judged(result) -> dict:
     j = result.get("judged") or dict(verdict="none" if result["chosen"] is None else "named",
                                      ambiguous=[], separating_excitation=[])
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
-                              "size_tests", "confirmation", "left_out", "below_size")
+                              "size_tests", "confirmation", "left_out", "below_size",
+                              "beyond_size")
             if k in j}
 
 
@@ -160,6 +161,11 @@ def ambiguity_summary(report) -> str:
                 f"{c['name']} beats the unmodified model there (cluster z "
                 f"{c['z_vs_none']:.2f}, {100 * c['reduction']:.1f}% less error), so `none` "
                 f"is not kept beside it.")
+    for b in (b for b in report.get("beyond_size", []) if b["beyond"]):
+        out += (f" Beyond its size that matters on held-out windows the fit never used: "
+                f"{b['name']} = {_fmt(b['value'])} beats both the unmodified model (cluster "
+                f"z {b['z_vs_none']:.2f}) and the model fixed at {_fmt(b['size'])} (z "
+                f"{b['z_vs_size']:.2f}), so `none` is not kept beside it.")
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "
