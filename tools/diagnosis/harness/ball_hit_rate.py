@@ -30,6 +30,9 @@ diagnosed and scored:
                  (engine/boundary.py below_size)
   left_out       each single member beside `none`: its own fit against `none` there
                  (a record; no answer depends on it)
+  beyond_size    each member beside `none` whose value lies beyond its size: its fit
+                 against `none` and against the size there, and whether `none` left
+                 (engine/boundary.py beyond_size)
   ambiguous_notes  per member of the ambiguous set, why it joined (its `note`, e.g. "not
                  excluded: its fit is worse than `none` ...", or require_support's
                  `reason`: the chosen effect's interval holds the model's value)
