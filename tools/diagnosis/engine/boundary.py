@@ -242,6 +242,16 @@ def below_size(judged, spec, chosen, fits=(), shift=None) -> bool:
     return True
 
 
+def in_model_units(spec, cand, shift=None) -> bool:
+    """Whether `cand`'s sizes that matter are values of the model itself, so that the model
+    fixed there can be rolled out: not an offset read through a calibration shift {pair:
+    m} (its size is the total from the user's model), nor an effect with a measured
+    model-form bias (spec.model_form_bias: its size is the physical value)."""
+    shift, mf = shift or {}, getattr(spec, "model_form_bias", None) or {}
+    offset = shift.get(cand.target, 0.0) if cand.name == "contact_offset" else 0.0
+    return offset == 0.0 and cand.label() not in mf
+
+
 def beyond_size(judged, spec, fits, size_prob, size_none, shift=None):
     """Take `none` out of an ambiguous set when one of its effects is shown, on the windows
     the fit left out, to lie beyond its size that matters; returns that effect's fit
@@ -267,7 +277,6 @@ def beyond_size(judged, spec, fits, size_prob, size_none, shift=None):
     amb = judged.get("ambiguous") or []
     if size_prob is None or len(amb) < 2 or not any(a["name"] == "none" for a in amb):
         return None
-    shift, mf = shift or {}, getattr(spec, "model_form_bias", None) or {}
     by_label = {f.label(): f for f in fits if len(f.cands) == 1 and len(f.values) == 1}
     tests = []
     for a in amb:
@@ -276,8 +285,7 @@ def beyond_size(judged, spec, fits, size_prob, size_none, shift=None):
             continue
         c = f.cands[0]
         size = size_that_matters(spec, c)
-        if size is None or c.label() in mf or \
-                (c.name == "contact_offset" and shift.get(c.target, 0.0) != 0.0):
+        if size is None or not in_model_units(spec, c, shift):
             continue
         v, nominal = float(f.values[0]), float(c.nominal(spec)[0])
         side = [s for s, d in size_sides(c, spec, nominal, size) if d * (v - s) >= 0.0]

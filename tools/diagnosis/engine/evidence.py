@@ -290,8 +290,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     unread and the sizes that matter tested directly (boundary.untrusted_interval).
     size_prob: where the size tests are scored (boundary.size_test_problem; default
     prob); size_none: a callable giving `none`'s evaluation there (computed once)."""
-    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, reaches_size,
-                                                            size_sides, size_that_matters,
+    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, in_model_units,
+                                                            reaches_size, size_sides,
+                                                            size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
@@ -303,7 +304,6 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     z_excl = size_z()
     left_none = (size_none or functools.cache(lambda: evaluate(size_prob, None))) \
         if size_prob is not None else None
-    mf = getattr(spec, "model_form_bias", None) or {}
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = size_that_matters(spec, c)
@@ -316,7 +316,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         add = shift.get(c.target, 0.0) if c.name == "contact_offset" else 0.0
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
-        direct = add == 0.0 and c.label() not in mf
+        direct = in_model_units(spec, c, shift)
         reaches = reaches_size(size, nominal, lo, hi)
         untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob)
         if not (reaches or untrusted):
