@@ -118,3 +118,13 @@ def test_the_summary_counts_the_confirmations_on_the_left_out_windows():
         r["confirmation"] = c and dict(name=c[0], confirmed=c[1], z_vs_none=2.5)
     assert summarise(rows)["confirmations"] == dict(tested=4, confirmed=3,
                                                     confirmed_the_truth=2)
+
+
+def test_the_summary_counts_the_beyond_size_tests():
+    """Answers with a member tested beyond its size, and those whose `none` left."""
+    rows = [_row("friction_coefficient", "named", True), _row("none", "ambiguous", True, True),
+            _row("none", "named", True)]
+    rows[0]["beyond_size"] = [dict(name="friction_coefficient[ee_ball]", beyond=True)]
+    rows[1]["beyond_size"] = [dict(name="friction_coefficient[ee_ball]", beyond=False),
+                              dict(name="mass_scale[ball]", beyond=False)]
+    assert summarise(rows)["beyond_size"] == dict(tested=2, none_out=1)

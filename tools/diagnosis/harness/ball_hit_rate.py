@@ -122,6 +122,10 @@ def _summary(rows) -> dict:
                             named_effect=sum(r in named_eff for r in v))
                     for k, v in sorted(per.items())},
         confirmations=_confirmations(rows),
+        # members beside `none` tested beyond their sizes, and `none` taken out (beyond_size)
+        beyond_size=dict(tested=count(lambda r: r.get("beyond_size")),
+                         none_out=count(lambda r: any(t["beyond"] for t in
+                                                      r.get("beyond_size") or []))),
         # answers within their sizes that matter turned into `none` (boundary.below_size)
         within_size_to_none=count(lambda r: r.get("below_size")),
         targets=TARGETS)
