@@ -7,7 +7,8 @@ import numpy as np
 
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.boundary import beyond_size
-from adaptive_c3.tools.diagnosis.engine.evidence import fit_row, not_excluded, verdict
+from adaptive_c3.tools.diagnosis.engine.evidence import (fit_row, not_excluded, verdict,
+                                                        worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate
 from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
 from tests.test_diagnose_size_test import FRICTION, SlipProblem, _fric_fit, _spec
@@ -28,7 +29,7 @@ def _answer(truth_mu: float, fit_mu: float, ci):
     not_excluded(judged, spec, [fric], none_eval, prob=prob)
     assert [a["name"] for a in judged["ambiguous"]] == ["none", FRICTION.name]
     shown = beyond_size(judged, spec, [fric], prob,
-                        functools.cache(lambda: evaluate(prob, None)))
+                        functools.cache(lambda: evaluate(prob, None)), worse_z)
     return judged, shown, fric
 
 
@@ -74,7 +75,7 @@ def test_none_leaves_a_larger_set_and_the_rest_are_separated_from_the_effect():
     judged = dict(verdict="ambiguous", separating_excitation=[], ambiguous=[
         fit_row(None, none_eval), fit_row(mass, none_eval), fit_row(fric, none_eval)])
     shown = beyond_size(judged, spec, [fric, mass], prob,
-                        functools.cache(lambda: evaluate(prob, None)))
+                        functools.cache(lambda: evaluate(prob, None)), worse_z)
     assert shown is None and judged["verdict"] == "ambiguous"
     assert [a["name"] for a in judged["ambiguous"]] == [FRICTION.name, MASS.name]
     assert [p["between"] for p in judged["separating_excitation"]] == \

@@ -42,7 +42,7 @@ from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, ap
 from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows,
                                                   free_ball_verdict, not_excluded, require_support,
                                                   top_pushes_only, widen_for_phases,
-                                                  window_phases)
+                                                  window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
@@ -289,7 +289,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG)
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
                  size_prob=left_out, size_none=left_none)
-    shown = beyond_size(judged, spec, fits, left_out, left_none, shift)
+    shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift)
     if shown is not None and shown is not chosen:     # named: beyond its size there
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)

@@ -252,7 +252,7 @@ def in_model_units(spec, cand, shift=None) -> bool:
     return offset == 0.0 and cand.label() not in mf
 
 
-def beyond_size(judged, spec, fits, size_prob, size_none, shift=None):
+def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
     """Take `none` out of an ambiguous set when one of its effects is shown, on the windows
     the fit left out, to lie beyond its size that matters; returns that effect's fit
     when the set is then that effect alone (the answer names it), else None.
@@ -266,12 +266,12 @@ def beyond_size(judged, spec, fits, size_prob, size_none, shift=None):
     `excluded`: for a member whose fit (its fold values, each fitted without its fold)
     lies beyond its size, that fit against `none` AND against the model fixed at the size
     (at_size), cluster by cluster over the left-out windows (size_test_problem). Both at
-    z >= worse_z(members tested): `none` is then wrong only if both comparisons err for
-    one member (an intersection-union test, each at its share of 5 %). Skipped for an
+    z >= z_bar(members tested) (evidence.worse_z): `none` is then wrong only if both
+    comparisons err for one member (an intersection-union test, each at its share of
+    5 %). Skipped for an
     offset read through a calibration shift or a measured model-form bias, whose sizes
     are not the model's values. Recorded as judged["beyond_size"]."""
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-    from adaptive_c3.tools.diagnosis.engine.evidence import worse_z
     from adaptive_c3.tools.diagnosis.engine.proposals import (DEFAULT_SEPARATION,
                                                              MORE_EVIDENCE, proposal)
     amb = judged.get("ambiguous") or []
@@ -299,7 +299,7 @@ def beyond_size(judged, spec, fits, size_prob, size_none, shift=None):
                           z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat))))
     if not tests:
         return None
-    bar = worse_z(len(tests))
+    bar = z_bar(len(tests))
     for t in tests:
         t["beyond"] = bool(t["z_vs_none"] >= bar and t["z_vs_size"] >= bar)
     judged["beyond_size"] = tests
