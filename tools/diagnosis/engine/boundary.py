@@ -268,9 +268,9 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
     (at_size), cluster by cluster over the left-out windows (size_test_problem). Both at
     z >= z_bar(members tested) (evidence.worse_z): `none` is then wrong only if both
     comparisons err for one member (an intersection-union test, each at its share of
-    5 %). Skipped for an
-    offset read through a calibration shift or a measured model-form bias, whose sizes
-    are not the model's values. Recorded as judged["beyond_size"]."""
+    5 %). Skipped for an offset read through a calibration shift or a measured model-form
+    bias, whose sizes are not the model's values (in_model_units). Recorded as
+    judged["beyond_size"]."""
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     from adaptive_c3.tools.diagnosis.engine.proposals import (DEFAULT_SEPARATION,
                                                              MORE_EVIDENCE, proposal)
@@ -278,7 +278,7 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
     if size_prob is None or len(amb) < 2 or not any(a["name"] == "none" for a in amb):
         return None
     by_label = {f.label(): f for f in fits if len(f.cands) == 1 and len(f.values) == 1}
-    tests = []
+    tests, members = [], []          # the records, and (set row, fit) beside each
     for a in amb:
         f = by_label.get(Candidate(a["name"], a["target"]).label())
         if a["name"] == "none" or f is None or not f.physical:
@@ -291,26 +291,27 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
         side = [s for s, d in size_sides(c, spec, nominal, size) if d * (v - s) >= 0.0]
         if not side:
             continue
-        none_c = size_none()[2]
         _, _, fit_c, _ = evaluate(size_prob, f)
         size_c = at_size(size_prob, c, side[0], None, per_cluster=True)
         tests.append(dict(name=c.label(), value=v, size=float(side[0]),
-                          z_vs_none=float(cluster_z(none_c, fit_c, size_prob.z_stat)),
+                          z_vs_none=float(cluster_z(size_none()[2], fit_c, size_prob.z_stat)),
                           z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat))))
+        members.append((a, f))
     if not tests:
         return None
     bar = z_bar(len(tests))
     for t in tests:
         t["beyond"] = bool(t["z_vs_none"] >= bar and t["z_vs_size"] >= bar)
     judged["beyond_size"] = tests
-    shown = sorted((t for t in tests if t["beyond"]), key=lambda t: -t["z_vs_size"])
+    shown = sorted((i for i, t in enumerate(tests) if t["beyond"]),
+                   key=lambda i: -tests[i]["z_vs_size"])
     if not shown:
         return None
-    first = next(a for a in amb if Candidate(a["name"], a["target"]).label() == shown[0]["name"])
+    first, fit = members[shown[0]]
     rest = [a for a in amb if a["name"] != "none" and a is not first]
     if not rest:
         judged.update(verdict="named", ambiguous=[], separating_excitation=[])
-        return by_label[shown[0]["name"]]
+        return fit
     judged["ambiguous"] = [first, *rest]
     judged["separating_excitation"] = [
         proposal([first["name"], a["name"]], MORE_EVIDENCE.get(a["name"], DEFAULT_SEPARATION))
