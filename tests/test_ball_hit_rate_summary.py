@@ -128,3 +128,17 @@ def test_the_summary_counts_the_beyond_size_tests():
     rows[1]["beyond_size"] = [dict(name="friction_coefficient[ee_ball]", beyond=False),
                               dict(name="mass_scale[ball]", beyond=False)]
     assert summarise(rows)["beyond_size"] == dict(tested=2, none_out=1)
+
+
+def test_the_summary_counts_sizes_ruled_out_by_one_recording_alone():
+    """An exclusion the pooled test did not reach (z above the bar shared by the pooled
+    test and each recording's) counts; one the pooled test reached, or a test not
+    excluded, does not."""
+    rows = [_row("none", "named", True) for _ in range(3)]
+    rows[0]["size_tests"] = [dict(name="mass_scale[ball]", excluded=True, tested=[
+        dict(value=2.0, z_vs_none=-0.99, by_recording=[-2.25, 0.4])])]
+    rows[1]["size_tests"] = [dict(name="mass_scale[ball]", excluded=True, tested=[
+        dict(value=2.0, z_vs_none=-2.5, by_recording=[-2.25, -1.0])])]
+    rows[2]["size_tests"] = [dict(name="mass_scale[ball]", excluded=False, tested=[
+        dict(value=2.0, z_vs_none=-0.99, by_recording=[-1.5, 0.4])])]
+    assert summarise(rows)["excluded_by_one_recording"] == 1

@@ -56,7 +56,9 @@ def save_recording(path, rec: Recording) -> Path:
 def concat_recordings(recs) -> Recording:
     """One recording holding every episode of recs in turn (episode ids renumbered so
     that they stay apart; a recording without ids is one episode). The state and input
-    names must agree; extras are dropped (they need not exist in every recording)."""
+    names must agree; extras are dropped (they need not exist in every recording) but
+    one: `part` [T], the index in recs of the recording each row came from (the
+    diagnosis tests a size on each recording alone as well as on all of them)."""
     recs = list(recs)
     first = recs[0]
     for r in recs[1:]:
@@ -74,7 +76,9 @@ def concat_recordings(recs) -> Recording:
                      x=np.concatenate([r.x for r in recs]),
                      u=np.concatenate([r.u for r in recs]),
                      state_names=list(first.state_names), input_names=list(first.input_names),
-                     scenario=first.scenario, episode=np.concatenate(eps))
+                     scenario=first.scenario, episode=np.concatenate(eps),
+                     extras=dict(part=np.concatenate([np.full(len(r.t), i, np.int64)
+                                                      for i, r in enumerate(recs)])))
 
 
 def load_recording(path, allow_nonfinite: bool = False) -> Recording:

@@ -100,9 +100,10 @@ def worse_z(family: int) -> float:
     return max(Z_AMBIG, float(norm.ppf(1.0 - 0.05 / max(family, 1))))
 
 
-def size_z() -> float:
+def size_z(tests: int = 1) -> float:
     """The z beyond which an effect fixed at its size that matters is clearly worse than
-    `none` (boundary.excluded): one test per effect at 5 %, no share among them. A `none`
+    `none` (boundary.excluded): one effect's 5 %, no share among the effects, shared only
+    among the `tests` one size gets (all recordings and each alone: boundary.excluded). A `none`
     claims that EVERY effect is below its size, so it is wrong only when the one effect
     that is there was excluded: that single test's 5 % bounds it (an intersection-union
     test, Berger 1982), as it bounds the truth's leaving the set. Unlike the rival rule,
@@ -114,7 +115,7 @@ def size_z() -> float:
     clean draws or effects below their size; no size test of a true effect that matters
     scored between the two bars (the nearest: -1.51)."""
     from scipy.stats import norm
-    return float(norm.ppf(0.95))
+    return float(norm.ppf(1.0 - 0.05 / max(int(tests), 1)))
 
 
 def verdict(fits, chosen, none_eval, min_reduction: float, family: int | None = None,
@@ -268,7 +269,7 @@ def _join(judged, first: dict, other: dict, how: tuple | None = None) -> None:
 
 
 def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=None,
-                 size_prob=None, size_none=None) -> None:
+                 size_prob=None, size_none=None, part_of_row=None) -> None:
     """A `none` (the verdict, or a member of the ambiguous set) claims that the data rule
     out every effect of a size that matters (spec.relevant_size: (below, above) the
     nominal value). A single physical effect whose 95 % interval reaches that far is as
@@ -289,10 +290,12 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     rugged cost, a fit worse than `none` on the held-out windows has its interval left
     unread and the sizes that matter tested directly (boundary.untrusted_interval).
     size_prob: where the size tests are scored (boundary.size_test_problem; default
-    prob); size_none: a callable giving `none`'s evaluation there (computed once)."""
+    prob); size_none: a callable giving `none`'s evaluation there (computed once);
+    part_of_row [T]: the recording each row came from (several recordings diagnosed
+    together: each is also tested alone, boundary.excluded)."""
     from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, in_model_units,
-                                                            reaches_size, size_sides,
-                                                            size_that_matters,
+                                                            reaches_size, recording_parts,
+                                                            size_sides, size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
@@ -301,9 +304,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
                          or any(a["name"] == "none" for a in judged["ambiguous"])):
         return
     free = {f.cands: f for f in fits_free if len(f.cands) == 1}
-    z_excl = size_z()
     left_none = (size_none or functools.cache(lambda: evaluate(size_prob, None))) \
         if size_prob is not None else None
+    parts = recording_parts(prob if size_prob is None else size_prob, part_of_row)
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = size_that_matters(spec, c)
@@ -327,11 +330,13 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         if untrusted and not sides:
             continue
         out, tested = excluded(prob if size_prob is None else size_prob, f, sides,
-                               none_eval if size_prob is None else left_none(), z_excl)
+                               none_eval if size_prob is None else left_none(), size_z,
+                               parts)
         if tested:
             judged.setdefault("size_tests", []).append(dict(
                 name=c.label(), excluded=bool(out),
-                tested=[dict(value=v, z_vs_none=z) for v, z in tested]))
+                tested=[dict(value=v, z_vs_none=z, **(dict(by_recording=e, bar=size_z(
+                    1 + len(e))) if e else {})) for v, z, e in tested]))
         if out:
             continue
         row = fit_row(f, none_eval)

@@ -410,6 +410,17 @@ def evaluate(prob: Problem, fit: Fit | None):
     return ssr, n, np.concatenate(per_c) if per_c else np.zeros(0), per_window
 
 
+def cluster_rows(prob: Problem) -> np.ndarray:
+    """The recording row of each cluster's first window, in the order of evaluate's
+    per-cluster SSR (fold by fold)."""
+    out = []
+    for k in prob.folds:
+        W = prob.test(k)
+        _, first = np.unique(prob.clusters(W), return_index=True)
+        out.append(np.asarray(W.row)[first])
+    return np.concatenate(out) if out else np.zeros(0, int)
+
+
 def paired_z(a: np.ndarray, b: np.ndarray) -> float:
     """z of the mean per-cluster SSR reduction from a to b (positive = b better)."""
     d = a - b

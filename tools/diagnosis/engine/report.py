@@ -135,6 +135,15 @@ def _judged(result) -> dict:
             if k in j}
 
 
+def _alone(size_test) -> str:
+    """' (by recording 1 alone)' where the pooled test of several recordings did not rule
+    the size out and one recording's did (boundary.excluded), else ''."""
+    each, bar = size_test.get("by_recording"), size_test.get("bar")
+    if not each or size_test["z_vs_none"] <= -bar:
+        return ""
+    return f" (by recording {', '.join(str(i + 1) for i, z in enumerate(each) if z <= -bar)} alone)"
+
+
 def ambiguity_summary(report) -> str:
     """Sentences on where the evidence sits and, for an ambiguous verdict, what would
     settle it."""
@@ -144,7 +153,7 @@ def ambiguity_summary(report) -> str:
         out = (f" {100 * ev['share_in_phases']:.0f}% of the held-out gain is in "
                f"{'/'.join(ev['phases']) or 'all'} windows (the largest: episode "
                f"{w['episode']}, {w['start']:.2f}-{w['end']:.2f} s, {w['phase']}).")
-    ruled = [f"{t['name']} at {' and '.join(_fmt(x['value']) for x in t['tested'])}"
+    ruled = [f"{t['name']} at {' and '.join(_fmt(x['value']) + _alone(x) for x in t['tested'])}"
              for t in report.get("size_tests", []) if t["excluded"]]
     if ruled:
         out += (f" Ruled out at the size that matters (the model fixed there is clearly "

@@ -23,6 +23,7 @@ diagnosed and scored:
   size_excluded  effects whose size that matters the data ruled out directly
                  (engine/boundary.py), though their interval reached it or was not read
   size_tests     every such test: the effect, the sizes tried and their z against `none`
+                 (with a follow-up also each recording's alone: `by_recording`)
   confirmation   the chosen effect against `none` on the windows the fit left out, where
                  `none` had joined it (engine/boundary.py confirm_on_left_out)
   below_size     the effect(s) of an answer (named, or an ambiguous set) whose every
@@ -50,6 +51,7 @@ from pathlib import Path
 
 import numpy as np
 
+from adaptive_c3.tools.diagnosis.engine.evidence import size_z as _size_z
 from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import label as _label, score_draw
 
 TARGETS = dict(named=0.90, none_on_clean=1.0, coverage=0.85, truth_in_ambiguous=1.0,
@@ -126,6 +128,12 @@ def _summary(rows) -> dict:
         beyond_size=dict(tested=count(lambda r: r.get("beyond_size")),
                          none_out=count(lambda r: any(t["beyond"] for t in
                                                       r.get("beyond_size") or []))),
+        # answers with a size ruled out by one recording alone, not the pooled test
+        # (boundary.excluded; the bar shared among the 1 + k tests, evidence.size_z)
+        excluded_by_one_recording=count(lambda r: any(
+            t["excluded"] and any(x.get("by_recording") and x["z_vs_none"] > -_size_z(
+                1 + len(x["by_recording"])) for x in t["tested"])
+            for t in r.get("size_tests") or [])),
         # answers within their sizes that matter turned into `none` (boundary.below_size)
         within_size_to_none=count(lambda r: r.get("below_size")),
         targets=TARGETS)
