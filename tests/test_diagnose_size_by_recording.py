@@ -25,10 +25,7 @@ class TwoRecordings(SlipProblem):
         self.offset = np.random.default_rng(5).normal(lean_at, 1.0, (WINDOWS, 1, 1))
 
     def residuals(self, effects, W):
-        mu = 1.0
-        for c, v in effects:
-            if c.name == "friction_coefficient":
-                mu = float(v[0])
+        mu = self.mu_of(effects)
         i = W.row // 10
         follow_up = (i >= WINDOWS // 2)[:, None, None]
         return self.noise[i] + np.where(follow_up, self.offset[i] - self.lean * self._slip(mu),

@@ -34,11 +34,14 @@ class SlipProblem(Problem):
     def _slip(self, mu):
         return max(self.slip_at - mu, 0.0)
 
+    @staticmethod
+    def mu_of(effects) -> float:
+        """The EE-ball mu the effects set (the model's 1 when none does)."""
+        return next((float(v[0]) for c, v in effects if c.name == "friction_coefficient"),
+                    1.0)
+
     def residuals(self, effects, W):
-        mu = 1.0
-        for c, v in effects:
-            if c.name == "friction_coefficient":
-                mu = float(v[0])
+        mu = self.mu_of(effects)
         idx = W.row // 10
         gap = 6.0 * (self._slip(mu) - self._slip(self.truth_mu))
         return self.noise[idx] + gap
