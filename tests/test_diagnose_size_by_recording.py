@@ -15,12 +15,13 @@ WINDOWS = 240          # the first half from the first recording, the rest the f
 
 
 class TwoRecordings(SlipProblem):
-    """The first recording's windows show the data's slip response (clean data: mu 1)
-    scaled by `first`; the follow-up's barely see it: a per-window offset (mean `lean_at`)
+    """The first recording's windows show the data's slip response (truth_mu; clean data:
+    mu 1) scaled by `first`; the follow-up's barely see it: a per-window offset (mean `lean_at`)
     that an EE-ball mu below the slip point reduces by `lean` (a model-form lean)."""
 
-    def __init__(self, spec, first: float, lean: float, lean_at: float = 0.0):
-        super().__init__(spec, truth_mu=1.0, windows=WINDOWS)
+    def __init__(self, spec, first: float, lean: float, lean_at: float = 0.0,
+                 truth_mu: float = 1.0):
+        super().__init__(spec, truth_mu=truth_mu, windows=WINDOWS)
         self.first, self.lean = first, lean
         self.offset = np.random.default_rng(5).normal(lean_at, 1.0, (WINDOWS, 1, 1))
 
@@ -29,7 +30,8 @@ class TwoRecordings(SlipProblem):
         i = W.row // 10
         follow_up = (i >= WINDOWS // 2)[:, None, None]
         return self.noise[i] + np.where(follow_up, self.offset[i] - self.lean * self._slip(mu),
-                                        self.first * self._slip(mu))
+                                        self.first * (self._slip(mu)
+                                                      - self._slip(self.truth_mu)))
 
 
 PART_OF_ROW = (np.arange(WINDOWS * 10) // 10 >= WINDOWS // 2).astype(int)
@@ -104,3 +106,23 @@ def test_the_report_says_which_recording_ruled_a_size_out():
     not_excluded(judged, prob.spec, [fric], none_eval, prob=prob, part_of_row=PART_OF_ROW)
     text = ambiguity_summary(judged)
     assert "friction_coefficient[ee_ball] at 0.5 (by recording 1 alone)" in text, text
+
+
+def test_a_size_outside_the_pooled_interval_that_one_recording_favours_stays():
+    """The first recording's data slip as at mu 0.4, the follow-up hardly sees mu; the
+    pooled fit (0.9, interval 0.7..1.6) does not reach mu 0.5. One recording alone finds
+    mu 0.5 clearly better than `none`, so the friction stays beside `none`
+    (boundary.favoured_alone); without the recordings apart it is left out."""
+    prob = TwoRecordings(_spec(), 0.3, 0.0, truth_mu=0.4)
+    fric, none_eval = _fric_fit(prob, 0.9, [0.7, 1.6])
+    judged = dict(verdict="none", ambiguous=[], separating_excitation=[])
+    not_excluded(judged, prob.spec, [fric], none_eval, prob=prob, part_of_row=PART_OF_ROW)
+    t = judged["size_tests"][0]
+    assert t["excluded"] is False and "tested" not in t
+    f = t["favoured"][0]
+    assert f["value"] == 0.5 and max(f["by_recording"]) >= f["bar"] > 2.0
+    assert [a["name"] for a in judged["ambiguous"]] == ["none", "friction_coefficient"]
+    assert "clearly better than `none`" in judged["ambiguous"][1]["note"]
+    judged = dict(verdict="none", ambiguous=[], separating_excitation=[])
+    not_excluded(judged, prob.spec, [fric], none_eval, prob=prob)       # pooled only
+    assert judged["verdict"] == "none" and not judged.get("size_tests")

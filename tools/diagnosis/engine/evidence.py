@@ -292,10 +292,13 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     size_prob: where the size tests are scored (boundary.size_test_problem; default
     prob); size_none: a callable giving `none`'s evaluation there (computed once);
     part_of_row [T]: the recording each row came from (several recordings diagnosed
-    together: each is also tested alone, boundary.excluded)."""
-    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, in_model_units,
-                                                            reaches_size, recording_parts,
-                                                            size_sides, size_that_matters,
+    together: each is also tested alone, boundary.excluded, and a size outside the
+    pooled interval that one of them finds clearly better keeps the effect beside
+    `none`, boundary.favoured_alone)."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, favoured_alone,
+                                                            in_model_units, reaches_size,
+                                                            recording_parts, size_sides,
+                                                            size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
@@ -322,27 +325,36 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         direct = in_model_units(spec, c, shift)
         reaches = reaches_size(size, nominal, lo, hi)
         untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob)
-        if not (reaches or untrusted):
+        if not (reaches or untrusted or (direct and parts is not None)):
             continue
         # (size that matters, -1 below / +1 above): those the interval reaches, or all
         sides = size_sides(c, spec, nominal, size, None if untrusted else (lo, hi)) \
-            if direct else []
+            if direct and (reaches or untrusted) else []
         if untrusted and not sides:
             continue
-        out, tested = excluded(prob if size_prob is None else size_prob, f, sides,
-                               none_eval if size_prob is None else left_none(), size_z,
-                               parts)
-        if tested:
+        sp, ne = (prob, none_eval) if size_prob is None else (size_prob, left_none())
+        out, tested = excluded(sp, f, sides, ne, size_z, parts) if reaches or untrusted \
+            else (True, [])
+        # the other sizes, where one recording alone may find the effect clearly better
+        favoured = favoured_alone(sp, f, [x for x in size_sides(c, spec, nominal, size)
+                                          if x not in sides], ne, size_z, parts) \
+            if out and direct else []
+        if tested or favoured:
             judged.setdefault("size_tests", []).append(dict(
-                name=c.label(), excluded=bool(out),
-                tested=[dict(value=v, z_vs_none=z, **(dict(by_recording=e, bar=size_z(
-                    1 + len(e))) if e else {})) for v, z, e in tested]))
-        if out:
+                name=c.label(), excluded=bool(out and not favoured),
+                **{k: [dict(value=v, z_vs_none=z, **(dict(by_recording=e, bar=size_z(
+                    1 + len(e))) if e else {})) for v, z, e in rows]
+                   for k, rows in (("tested", tested), ("favoured", favoured)) if rows}))
+        if out and not favoured:
             continue
         row = fit_row(f, none_eval)
         row["values"] = [physical_interval(spec, c, v + add, 0.0, 0.0, 0.0)[0]
                          for v in row["values"]]
-        why = (f"its fit is worse than `none` on the held-out windows, so its interval "
+        why = (f"at {favoured[0][0]:.3g}, a size that matters outside its pooled 95 % "
+               f"interval {lo:.3g}..{hi:.3g}, it is clearly better than `none` (z "
+               f"{favoured[0][1]:.2f} pooled, {', '.join(f'{z:.2f}' for z in favoured[0][2])}"
+               f" by recording)" if favoured else
+               f"its fit is worse than `none` on the held-out windows, so its interval "
                f"{lo:.3g}..{hi:.3g} is not read, and the size that matters (the model's "
                f"{nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}) is not clearly worse than "
                f"`none` there" if untrusted else
