@@ -136,9 +136,9 @@ def test_the_summary_counts_sizes_ruled_out_by_one_recording_alone():
     excluded, does not."""
     rows = [_row("none", "named", True) for _ in range(3)]
     rows[0]["size_tests"] = [dict(name="mass_scale[ball]", excluded=True, tested=[
-        dict(value=2.0, z_vs_none=-0.99, by_recording=[-2.25, 0.4])])]
+        dict(value=2.0, z_vs_none=-0.99, by_recording=[-2.25, 0.4], bar=2.13)])]
     rows[1]["size_tests"] = [dict(name="mass_scale[ball]", excluded=True, tested=[
-        dict(value=2.0, z_vs_none=-2.5, by_recording=[-2.25, -1.0])])]
+        dict(value=2.0, z_vs_none=-2.5, by_recording=[-2.25, -1.0], bar=2.13)])]
     rows[2]["size_tests"] = [dict(name="mass_scale[ball]", excluded=False, tested=[
-        dict(value=2.0, z_vs_none=-0.99, by_recording=[-1.5, 0.4])])]
+        dict(value=2.0, z_vs_none=-0.99, by_recording=[-1.5, 0.4], bar=2.13)])]
     assert summarise(rows)["excluded_by_one_recording"] == 1

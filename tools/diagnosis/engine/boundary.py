@@ -76,21 +76,33 @@ def excluded(prob, fit, sides, none_eval, z_excl, parts=None) -> tuple[bool, lis
     with a follow-up of glancing strikes, which left the mass beside `none`."""
     if prob is None or not sides or len(fit.cands) != 1 or len(fit.values) != 1:
         return False, []
-    groups = [] if parts is None or len(np.unique(parts)) < 2 else \
-        [np.asarray(parts) == p for p in np.unique(parts)]
-    bar = z_excl(1 + len(groups)) if callable(z_excl) else float(z_excl)
+    groups, bar = _recordings_and_bar(parts, z_excl)
     v = float(fit.values[0])
     tested = []
     for s, direction in sides:
         if direction * (v - s) >= 0.0 and fit.z_vs_none > 0.0:
             return False, tested
-        ssr = at_size(prob, fit.cands[0], s, none_eval, per_cluster=True)
-        z = float(cluster_z(none_eval[2], ssr, prob.z_stat))
-        each = [float(cluster_z(none_eval[2][g], ssr[g], prob.z_stat)) for g in groups]
+        z, each = _z_pooled_and_alone(prob, fit.cands[0], s, none_eval, groups)
         tested.append((float(s), z, each))
         if min([z, *each]) > -bar or max([z, *each]) >= bar:   # not ruled out, or disputed
             return False, tested
     return True, tested
+
+
+def _recordings_and_bar(parts, z_excl) -> tuple[list, float]:
+    """([cluster mask] per recording, none with fewer than two; the bar of the 1 + k
+    tests): z_excl a bar, or a callable giving it for a number of tests."""
+    groups = [] if parts is None or len(np.unique(parts)) < 2 else \
+        [np.asarray(parts) == p for p in np.unique(parts)]
+    return groups, (z_excl(1 + len(groups)) if callable(z_excl) else float(z_excl))
+
+
+def _z_pooled_and_alone(prob, cand, value, none_eval, groups) -> tuple[float, list]:
+    """(z over all clusters, [z over each recording's]) of `cand` fixed at `value` against
+    `none` (at_size)."""
+    ssr = at_size(prob, cand, value, none_eval, per_cluster=True)
+    return (float(cluster_z(none_eval[2], ssr, prob.z_stat)),
+            [float(cluster_z(none_eval[2][g], ssr[g], prob.z_stat)) for g in groups])
 
 
 def favoured_alone(prob, fit, sides, none_eval, z_excl, parts) -> list:
@@ -103,15 +115,12 @@ def favoured_alone(prob, fit, sides, none_eval, z_excl, parts) -> list:
     2x beat `none` at z +3.5 on the first recording, the follow-up's fit read below 1,
     only 0.5x was tested, and the answer was a confident `none`. Such a size is not
     ruled out (the recordings disagree), so the effect stays beside `none`."""
-    if prob is None or parts is None or len(np.unique(parts)) < 2 or len(fit.cands) != 1:
+    groups, bar = _recordings_and_bar(parts, z_excl)
+    if prob is None or not groups or len(fit.cands) != 1:
         return []
-    groups = [np.asarray(parts) == p for p in np.unique(parts)]
-    bar = z_excl(1 + len(groups)) if callable(z_excl) else float(z_excl)
     out = []
     for s, _ in sides:
-        ssr = at_size(prob, fit.cands[0], s, none_eval, per_cluster=True)
-        z = float(cluster_z(none_eval[2], ssr, prob.z_stat))
-        each = [float(cluster_z(none_eval[2][g], ssr[g], prob.z_stat)) for g in groups]
+        z, each = _z_pooled_and_alone(prob, fit.cands[0], s, none_eval, groups)
         if max([z, *each]) >= bar:
             out.append((float(s), z, each))
     return out

@@ -51,7 +51,6 @@ from pathlib import Path
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.engine.evidence import size_z as _size_z
 from adaptive_c3.tools.diagnosis.harness.concealed_ball_data import label as _label, score_draw
 
 TARGETS = dict(named=0.90, none_on_clean=1.0, coverage=0.85, truth_in_ambiguous=1.0,
@@ -129,10 +128,10 @@ def _summary(rows) -> dict:
                          none_out=count(lambda r: any(t["beyond"] for t in
                                                       r.get("beyond_size") or []))),
         # answers with a size ruled out by one recording alone, not the pooled test
-        # (boundary.excluded; the bar shared among the 1 + k tests, evidence.size_z)
+        # (boundary.excluded; `bar`: the one the 1 + k tests share, evidence.size_z)
         excluded_by_one_recording=count(lambda r: any(
-            t["excluded"] and any(x.get("by_recording") and x["z_vs_none"] > -_size_z(
-                1 + len(x["by_recording"])) for x in t["tested"])
+            t["excluded"] and any(x.get("by_recording") and x["z_vs_none"] > -x["bar"]
+                                  for x in t["tested"])
             for t in r.get("size_tests") or [])),
         # answers within their sizes that matter turned into `none` (boundary.below_size)
         within_size_to_none=count(lambda r: r.get("below_size")),
