@@ -185,7 +185,7 @@ def test_r_comp_with_a_calibration_sized_pair_is_no_choice():
     rc = Candidate("r_comp", "all_pairs")
     assert _calibration_sized(fit([rc], [4e-4, -2.3e-3]), spec)
     assert not _calibration_sized(fit([rc], [2e-3, -2.3e-3]), spec)
-    assert not _calibration_sized(fit([Candidate("contact_offset", "ball_table")], [4e-4]), spec)
+    assert not _calibration_sized(fit([Candidate("contact_offset", "ball_table")], [2e-3]), spec)
     force = Candidate("external_force", "ball_x")        # a small force is not an offset
     assert not _calibration_sized(fit([rc, force], [2e-3, -2.3e-3, 4e-4]), spec)
     assert _calibration_sized(fit([force, rc], [0.03, 2e-3, 5e-4]), spec)

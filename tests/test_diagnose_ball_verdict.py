@@ -305,9 +305,38 @@ def test_a_pair_with_a_calibration_sized_offset_is_no_choice():
     assert _calibration_sized(fit([table, ee], [-6.2e-4, 7.0e-4]), spec)
     assert _calibration_sized(fit([("mass_scale", "ball"), ee], [1.5, 4e-4]), spec)
     assert not _calibration_sized(fit([table, ee], [-2.2e-3, 1.4e-3]), spec)
-    assert not _calibration_sized(fit([table], [-6.2e-4]), spec)      # a single competes
+    assert not _calibration_sized(fit([table], [-1.2e-3]), spec)      # a single competes
     assert not _calibration_sized(fit([("mass_scale", "ball"), ("viscous_damping", "ball")],
                                       [1.5, 4e-4]), spec)
+
+
+def test_a_single_offset_whose_total_is_within_the_calibration_tolerance_is_no_choice():
+    """A contact_offset on top of its pair's kept calibration is read as their total from
+    the user's model (report.calibration_shift); within the +-1 mm tolerance it is that
+    calibration re-estimated, not an effect. The twenty-fourth set's 100315 (an EE-ball
+    offset of 1.06 mm) named a table offset of -0.30 mm on a 0.50 mm table calibration:
+    0.20 mm in total."""
+    from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+    from adaptive_c3.tools.diagnosis.engine.selection import _calibration_sized, base_shift
+    spec = ball_spec(load_scenario(BALL)[0])
+
+    def fit(cands, values):
+        values = np.array(values, float)
+        return Fit(tuple(Candidate(*c) for c in cands), values, np.zeros((len(values), 2)),
+                   np.zeros(len(values)), 0.0)
+    table = ("contact_offset", "ball_table")
+    assert _calibration_sized(fit([table], [-6.2e-4]), spec)           # no calibration kept
+    assert _calibration_sized(fit([table], [-3.0e-4]), spec, {"ball_table": 5.0e-4})
+    assert not _calibration_sized(fit([table], [6.0e-4]), spec, {"ball_table": 5.0e-4})
+    # another pair's calibration does not count toward this pair's total
+    assert _calibration_sized(fit([table], [6.0e-4]), spec, {"ee_ball": 5.0e-4})
+    assert not _calibration_sized(fit([("mass_scale", "ball")], [1.5]), spec, {"ee_ball": 5e-4})
+
+    class Base:
+        base = [(Candidate("calibration_offset", "ball_table"), np.array([5e-4])),
+                (Candidate("actuator_delay", ""), np.array([0.006])),
+                (Candidate("calibration_offset", "ee_ball"), np.array([-2e-4]))]
+    assert base_shift(Base) == {"ball_table": 5e-4, "ee_ball": -2e-4}
 
 
 @pytest.fixture(scope="module")

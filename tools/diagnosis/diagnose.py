@@ -261,7 +261,9 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")
     P_user, user_base = P0, list(base)     # the model as the user gave it
+    t_nuisance = time.perf_counter()
     nuisance = fit_nuisance(prob)          # e.g. a sensor delay: part of the base model
+    t_nuisance = time.perf_counter() - t_nuisance
     base = list(prob.base)
     P0 = patch(spec, base)
     windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
@@ -325,7 +327,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
                 P0=P0, P_user=P_user, P1=P1, P1_folds=after, errors=errors,
                 contact=contact_summary(spec, steps), horizon=horizon, judged=judged,
                 nuisance=nuisance, fits_free=fits_free, **backend_fields(spec, chosen),
-                seconds=time.perf_counter() - start)
+                nuisance_seconds=t_nuisance, seconds=time.perf_counter() - start)
 
 
 def widen(scored, none_scored, chosen, judged, user_base, nuisance) -> None:

@@ -414,7 +414,9 @@ def judged_fields(result, truth) -> dict:
     return dict(verdict=j.get("verdict", "named"), ambiguous=amb,
                 in_ambiguous_set=(t in amb) if amb else None,
                 excess_before=eb, excess_after=ea, excess_cut=eb / max(ea, EXCESS_RESOLUTION),
-                nuisance=[dict(name=f.label(), values=[float(v) for v in f.values])
+                nuisance=[dict(name=f.label(), values=[float(v) for v in f.values],
+                               **({"first_sweep": [float(v) for v in f.earlier_values]}
+                                  if hasattr(f, "earlier_values") else {}))
                           for f in result.get("nuisance", [])],
                 size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]],
                 below_size=[x["name"] for x in j.get("below_size", [])],

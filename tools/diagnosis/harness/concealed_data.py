@@ -293,7 +293,7 @@ def score_diagnosis(seed, rec, truth, clean, spec, result, baseline: bool = True
                clean_cut=before / max(after, 1e-12),
                noisy_rollout_before=errs["before"]["rollout"]["normalised_rms"],
                noisy_rollout_after=errs["after"]["rollout"]["normalised_rms"],
-               seconds=result["seconds"])
+               seconds=result["seconds"], nuisance_seconds=result.get("nuisance_seconds"))
     if baseline:
         from adaptive_c3.tools.diagnosis.harness.sindy_baseline import sindy_diagnose
         b = sindy_diagnose(rec, spec)

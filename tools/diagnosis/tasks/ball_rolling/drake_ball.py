@@ -96,6 +96,10 @@ class DrakeBallSpec(BallSpec):
     # kept calibrations free (engine/joint_refit.py) and its interval widened to the
     # values held-out data do not reject (engine/held_out.py)
     rugged_cost: bool = True
+    # the nuisances fitted one after another, an early one takes up what a later one
+    # explains better (a table calibration part of an EE-ball offset): each kept one is
+    # then fitted again with all the others held (engine/selection.py fit_nuisance)
+    nuisance_sweeps: int = 2
     # the reported errors in the noise calibrated by injection (engine/locate.py
     # calibrate_noise): 0.83-1.19x the true noise per state on this backend; the LCS's
     # rigid contacts answer added noise less linearly (0.87-1.41x) and keep the one-step
