@@ -71,3 +71,17 @@ def test_the_second_sweep_records_the_first_sweeps_values():
     kept = fit_nuisance(LevelProblem(spec, (0.9e-3, 0.0), ball_weight=3e3))
     first = {f.cands[0]: float(f.earlier_values[0]) for f in kept}
     assert abs(first[TABLE_CAL] - 0.576e-3) < 3e-5 and abs(first[EE_CAL] - 0.324e-3) < 3e-5
+
+
+def test_the_second_sweep_leaves_the_users_own_effects_in_the_model():
+    # a scenario that already sets an EE-ball calibration of its own (the user's base):
+    # the sweep takes out only what the first sweep added
+    spec = _spec()
+    spec.nuisance_sweeps = 2
+    prob = LevelProblem(spec, (0.9e-3, 0.0), ball_weight=3e3)
+    own = (EE_CAL, np.array([0.1e-3]))
+    prob.base = [own]
+    kept = {f.cands[0]: float(f.values[0]) for f in fit_nuisance(prob)}
+    assert any(e is own for e in prob.base)
+    assert sorted(float(v[0]) for c, v in prob.base if c == EE_CAL) == \
+        sorted([0.1e-3, kept[EE_CAL]])

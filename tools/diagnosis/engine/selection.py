@@ -129,23 +129,27 @@ def fit_nuisance(prob: Problem) -> list:
     EE-ball's took 0.75 mm; a table offset of -0.30 mm on top of it was then named, its
     total 0.20 mm within the table's calibration tolerance: a re-estimate of the
     nuisance, which beat the sequential one at z 12.8 on the left-out windows."""
-    kept = []
+    kept, added = [], {}         # added: the base entries each kept fit put there
+
+    def keep(f):
+        added[id(f)] = f.effects(prob.spec)
+        prob.base = list(prob.base) + added[id(f)]
+        kept.append(f)
+
     for name, target in getattr(prob.spec, "nuisance", ()):
         f = _supported_nuisance(prob, Candidate(name, target))
         if f is not None:
-            prob.base = list(prob.base) + f.effects(prob.spec)
-            kept.append(f)
+            keep(f)
     for _ in range(int(getattr(prob.spec, "nuisance_sweeps", 1)) - 1):
         if len(kept) < 2:
             break
         for f in list(kept):
-            c = f.cands[0]
-            prob.base = [e for e in prob.base if e[0] != c]
-            g = _supported_nuisance(prob, c, f)
+            mine = added.pop(id(f))
+            prob.base = [e for e in prob.base if not any(e is m for m in mine)]
             kept.remove(f)
+            g = _supported_nuisance(prob, f.cands[0], f)
             if g is not None:
-                prob.base = list(prob.base) + g.effects(prob.spec)
-                kept.append(g)
+                keep(g)
     return kept
 
 
