@@ -452,3 +452,13 @@ def cartpole_spec(scenario) -> SystemSpec:
             "contact_dissipation": "the wall contacts are springs; their damping is "
                                    "contact_damping",
             "torsional_friction": "the cart-pole's wall contacts are frictionless"})
+
+
+def calibration_sums(effects) -> dict:
+    """{pair: m}: the calibration_offset values among `effects` [(Candidate, values)],
+    summed per pair (the shift a contact_offset of that pair is read on top of)."""
+    out = {}
+    for c, p in effects:
+        if c.name == "calibration_offset":
+            out[c.target] = out.get(c.target, 0.0) + float(np.ravel(p)[0])
+    return out

@@ -78,12 +78,9 @@ NUISANCE_NOTES = {
 
 def calibration_shift(result) -> dict:
     """{pair: m}: the calibration offsets kept as nuisance (see _params)."""
-    out = {}
-    for f in result.get("nuisance", []):
-        for c, v in zip(f.cands, f.values):
-            if c.name == "calibration_offset":
-                out[c.target] = out.get(c.target, 0.0) + float(v)
-    return out
+    from adaptive_c3.tools.diagnosis.backends.effects import calibration_sums
+    return calibration_sums((c, [v]) for f in result.get("nuisance", [])
+                            for c, v in zip(f.cands, f.values))
 
 
 def candidate_rows(result, key: str = "fits") -> list:

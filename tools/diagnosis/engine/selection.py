@@ -108,11 +108,8 @@ def _calibration_sized(f, spec, shift=None) -> bool:
 
 def base_shift(prob: Problem) -> dict:
     """{pair: m}: the calibration offsets in prob.base (the kept nuisances)."""
-    out = {}
-    for c, p in prob.base:
-        if c.name == "calibration_offset":
-            out[c.target] = out.get(c.target, 0.0) + float(p[0])
-    return out
+    from adaptive_c3.tools.diagnosis.backends.effects import calibration_sums
+    return calibration_sums(prob.base)
 
 
 def fit_nuisance(prob: Problem) -> list:
