@@ -72,7 +72,8 @@ def test_a_set_asking_for_release_and_rest_gets_both_kinds_of_push():
     """Dev draw 70002 (mass 2.0x) ended {mass, ball-table offset, none, drag}: the merged
     follow-up released every push (drag's ask) at mass's 8-12 m/s^2, where the LCS reads
     a spurious mass. A set asking for both now gets half release pushes, half that end
-    at rest; one asking for releases only keeps releasing every push."""
+    at rest (besides mass's head-on strikes); one asking for releases only keeps releasing
+    every push."""
     from adaptive_c3.tools.diagnosis.engine.evidence import against_none
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Pusher
     from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ModelParams
@@ -91,7 +92,9 @@ def test_a_set_asking_for_release_and_rest_gets_both_kinds_of_push():
                          np.zeros(3))
             out.append(pusher.segs[-1][3] is not None)     # ends moving: a release
         return np.mean(out)
-    assert 0.4 < released(mixed) < 0.6
+    pushes = {k: v for k, v in mixed.items() if k not in ("strike_fraction", "strike_angle")}
+    assert mixed["strike_fraction"] == 0.5               # mass's head-on strikes
+    assert 0.4 < released(pushes) < 0.6                  # of the pushes, half release
     assert released(only) == 1.0 and released({}) == 0.0
 
 
@@ -351,3 +354,25 @@ def test_coasts_from_slow_to_fast_tell_a_drag_from_rolling_resistance():
     assert verdict == "ambiguous"
     assert {"viscous_damping", "rolling_resistance"} <= set(members)
     assert answer([0.05, 0.3]) == ("named", [], "viscous_damping[ball]")
+
+
+def test_mass_asks_for_head_on_strikes_and_a_merge_keeps_friction_s_glancing_ones():
+    """A mass against `none` asks for half the episodes as head-on strikes (the contact
+    normal 5-20 deg from the EE's path); merged with EE-ball friction's glancing strikes
+    (the default 50-70 deg) the strikes span both; a model without side contacts gets
+    the pushes alone."""
+    from adaptive_c3.tools.diagnosis.engine.proposals import (MORE_EVIDENCE, against_none,
+                                                              proposal, top_pushes_only)
+    mass = against_none("mass_scale")[1]
+    assert mass["strike_fraction"] == 0.5 and mass["strike_angle"] == [5.0, 20.0]
+    Excitation().changed(**mass)                          # a valid gait
+    both = merge_changes([mass, MORE_EVIDENCE["friction_coefficient"][1]])
+    assert both["strike_angle"] == [5.0, 70.0]
+    alone = merge_changes([mass, against_none("viscous_damping")[1]])
+    assert alone["strike_angle"] == [5.0, 20.0]
+    judged = dict(separating_excitation=[proposal(["mass_scale", "none"],
+                                                  against_none("mass_scale"))])
+    top_pushes_only(judged)
+    ex = judged["separating_excitation"][0]["excitation"]
+    assert "strike_fraction" not in ex and "strike_angle" not in ex and "press" not in ex
+    assert ex["peak_accel"] == [8.0, 12.0] and ex["episodes"] == 25

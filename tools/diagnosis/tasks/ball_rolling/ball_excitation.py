@@ -80,7 +80,7 @@ def merge_changes(changes) -> dict:
     """One excitation change from several proposals, each asking for more of something:
     the most and the longest episodes, the faster release, the slower touch-down, axis
     directions if any asks for them; press and acceleration from the first that sets
-    them. When one asks for release pushes and another for pushes without a release
+    them; strike angles spanning every proposal's. When one asks for release pushes and another for pushes without a release
     (it sets the press or the acceleration, not the release), half the pushes release
     and half end at rest: release pushes are where the LCS reads a spurious mass or
     EE-ball friction, so a push-phase effect needs pushes that end at rest."""
@@ -101,6 +101,12 @@ def merge_changes(changes) -> dict:
                 out[k] = max(out[k], v, key=lambda r: r[1])
             elif k == "directions" and v == "axes":
                 out[k] = v
+    # strikes asked at different angles (a friction's glancing ones, the default, and a
+    # mass's head-on ones) span both
+    angles = [tuple(ch.get("strike_angle", Excitation.strike_angle)) for ch in changes
+              if ch.get("strike_fraction", 0.0) > 0]
+    if len(set(angles)) > 1:
+        out["strike_angle"] = [min(a[0] for a in angles), max(a[1] for a in angles)]
     return out
 
 
