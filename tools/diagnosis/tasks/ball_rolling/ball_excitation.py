@@ -80,10 +80,11 @@ def merge_changes(changes) -> dict:
     """One excitation change from several proposals, each asking for more of something:
     the most and the longest episodes, the faster release, the slower touch-down, axis
     directions if any asks for them; press and acceleration from the first that sets
-    them; strike angles spanning every proposal's. When one asks for release pushes and another for pushes without a release
-    (it sets the press or the acceleration, not the release), half the pushes release
-    and half end at rest: release pushes are where the LCS reads a spurious mass or
-    EE-ball friction, so a push-phase effect needs pushes that end at rest."""
+    them; strike angles spanning every proposal's. When one asks for release pushes and
+    another for pushes without a release (it sets the press or the acceleration, not the
+    release), half the pushes release and half end at rest: release pushes are where the
+    LCS reads a spurious mass or EE-ball friction, so a push-phase effect needs pushes
+    that end at rest."""
     changes = list(changes)
     out: dict = {}
     releases = any(ch.get("release_speed", (0.0, 0.0))[1] > 0 for ch in changes)
