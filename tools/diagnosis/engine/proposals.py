@@ -136,7 +136,7 @@ def top_pushes_only(judged) -> None:
         ex = p.get("excitation", {})
         if ex.pop("strike_fraction", None) is None:
             continue
-        if ex.pop("strike_angle", None) is not None:     # head-on: pushes alone instead
+        if ex.pop("strike_angle", None) == HEAD_ON["strike_angle"]:   # pushes alone instead
             p["change"] += ("; this model cannot follow a contact on the ball's side, so "
                             "pushes only, no strikes")
             continue
