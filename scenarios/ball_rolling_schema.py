@@ -151,7 +151,7 @@ class DrakeWorld:
     MultibodyPlant with SAP and point contact (EE tip sphere driven by the recorded EE
     force, ball, table). `run` does not read it. 0 (or -1 for friction) = the `model`
     section's value; what a drake diagnosis finds is written here."""
-    time_step: float = 0.0           # s, SAP step; 0 = the recording's step / 2
+    time_step: float = 0.0           # s, SAP step; 0 = the recording's step / 4
     point_stiffness: float = 1.0e5   # N/m, every geometry (a pair: half, in series)
     relaxation_time: float = 2.0e-3  # s, SAP's dissipation time scale, every geometry
     friction: List[float] = dc.field(default_factory=lambda: [-1.0, -1.0])  # mu of

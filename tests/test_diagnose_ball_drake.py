@@ -1,7 +1,5 @@
 """`diagnose --model drake` for ball rolling: Drake's plant of the scenario's world behind
 the same engine (tools/diagnosis/tasks/ball_rolling/drake_ball.py)."""
-import copy
-
 import numpy as np
 import pytest
 import yaml
@@ -40,39 +38,20 @@ def _rms(spec, effects, W) -> float:
     return float(np.sqrt(np.mean(((X - W.Xt) / NOISE_STD)[..., keep] ** 2)))
 
 
-def _true_and_nominal_rms(scenario, time_step: float) -> tuple[float, float]:
-    """10-step rollout rms (in sensor noise) from a harness draw's noise-free states (draw
-    8000, EE-ball friction, no second-engine variation), with the draw's true mu and with
-    the nominal mu = 1, SAP at `time_step` (0: the default)."""
+def test_given_the_draws_true_parameters_it_reproduces_a_harness_recording(scenario):
+    """From the noise-free states, 10-step rollouts stay within ~1/3 of the sensor noise
+    with the draw's EE-ball friction, and are clearly worse with the nominal mu = 1."""
     rec, truth, clean = _draw(scenario, 8000, "friction_coefficient", "ee_ball")
     crec = Recording(t=rec.t, x=clean, u=rec.u, state_names=rec.state_names,
                      input_names=rec.input_names, episode=rec.episode)
-    sc = copy.deepcopy(scenario)
-    sc.drake.time_step = time_step
-    spec = drake_ball_spec(sc, workers=1)
+    spec = drake_ball_spec(scenario, workers=1)
     spec.prepare(crec)
     W = make_windows(crec, 10)
     W = W.take(np.arange(len(W)) % 4 == 0)
-    return (_rms(spec, [(Candidate(truth.name, truth.target), [truth.value])], W),
-            _rms(spec, [], W))
-
-
-def test_given_the_draws_true_parameters_it_reproduces_a_harness_recording(scenario):
-    """The plant's physics is the harness's: at a quarter of the recording's step, 10-step
-    rollouts stay within ~1/3 of the sensor noise with the draw's EE-ball friction, and are
-    clearly worse with the nominal mu = 1."""
-    true_rms, nominal_rms = _true_and_nominal_rms(scenario, 0.0025)
+    true_rms = _rms(spec, [(Candidate(truth.name, truth.target), [truth.value])], W)
+    nominal_rms = _rms(spec, [], W)
     assert true_rms < 0.4, true_rms
     assert nominal_rms > 2.0 * true_rms, (nominal_rms, true_rms)
-
-
-def test_the_default_step_trades_some_fidelity_for_speed(scenario):
-    """At the default step (half the recording's, drake_ball.SUBSTEPS) the same rollouts
-    are 0.47 of the noise off with the true mu (0.27 at a quarter step) and the nominal mu
-    is still clearly worse (0.80): the figures drake_ball.py states for its default."""
-    true_rms, nominal_rms = _true_and_nominal_rms(scenario, 0.0)
-    assert true_rms < 0.5, true_rms
-    assert nominal_rms > 1.6 * true_rms, (nominal_rms, true_rms)
 
 
 def _problem(rec, spec, windows: int) -> Problem:

@@ -1,6 +1,6 @@
 """The `drake` model backend of the ball-rolling diagnosis: Drake's MultibodyPlant of the
 scenario's world (ball_plant.py: EE tip sphere driven by the recorded EE force, ball,
-table; SAP with point contact at the recording step / 2), replaying the recorded inputs
+table; SAP with point contact at the recording step / 4), replaying the recorded inputs
 from recorded states over the engine's windows.
 
 It satisfies the engine's model protocol as the `lcs` backend (effects_ball.py) does:
@@ -44,16 +44,13 @@ from adaptive_c3.tools.diagnosis.tasks.ball_rolling.drake_ball_rollout import Ro
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import (
     POS, QUAT, BallSpec, ball_patch, ball_spec)
 
-SUBSTEPS = 2              # SAP steps per recording step when drake.time_step is 0
-# Rollouts are nearly all of a diagnosis's time (SAP: ~34 us per window and step). At dt / 4
-# the 15-episode bench diagnosis took 53-63 s on a machine whose machine/python row reads
-# 62 ms, over its 60 s mark; at dt / 2, 40-42 s. The cost: with a harness draw's true
-# parameters and no second-engine variation, 10-step rollouts are 0.47 of the sensor noise
-# off at dt / 2 against 0.27 at dt / 4 (the nominal model 0.80 / 0.68; draw 8000, EE-ball
-# mu). On ten development draws with the variation (90400, 90401, 90404, 90418, 90436,
-# 90438, 90440, 90465, 90466, 90479; one recording, a follow-up when ambiguous) dt / 2
-# answered 7 confidently right and 3 ambiguous with the truth, dt / 4 5 right, 4
-# ambiguous and 1 wrong (90400, EE-ball mu 0.30 named a mass); 90418 lost its right answer
+SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is 0
+# Rollouts are nearly all of a diagnosis's time (SAP: ~34 us per window and step): half the
+# step would cut the 15-episode bench diagnosis from 53-63 s to 40-42 s on a machine whose
+# machine/python row reads 62 ms, but a draw's true parameters then reproduce a harness
+# recording worse (10-step rollouts 0.47 of the noise off against 0.27, draw 8000), and on
+# the twenty-seventh evaluation set, run at half the step, the left-out confirmation named
+# a mass on draws whose truth was another effect or none (docs/diagnosis.md)
 FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
 CACHE_MODELS = 400        # rollouts kept for this many parameter sets (a diagnosis asks
@@ -133,7 +130,7 @@ class DrakeBallSpec(BallSpec):
         return drake_patch(self, effects)
 
     description: str = ("Drake's MultibodyPlant of the scenario's world, SAP with point "
-                        "contact at the recording step / 2")
+                        "contact at the recording step / 4")
 
     def close(self) -> None:
         """End the rollout worker processes (they start again on the next rollout)."""
