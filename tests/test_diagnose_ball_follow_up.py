@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_excitation import Excitation, merge_changes, quintic
+from adaptive_c3.tools.diagnosis.engine.proposals import FOLLOW_UP_EPISODES
 from adaptive_c3.tools.recording import Recording, RecordingError, concat_recordings
 
 
@@ -49,7 +50,7 @@ def test_every_proposal_is_a_gait_change():
         assert text and change
         Excitation().changed(**change)
     text, change = with_more_of_everything(MORE_EVIDENCE["contact_offset"])
-    assert change["touchdown_s"] == 0.4 and change["episodes"] == 25     # its own + more
+    assert change["touchdown_s"] == 0.4 and change["episodes"] == FOLLOW_UP_EPISODES     # its own + more
 
 
 def test_a_push_effect_against_none_asks_for_pushes_that_end_at_rest():
@@ -62,7 +63,8 @@ def test_a_push_effect_against_none_asks_for_pushes_that_end_at_rest():
     props = [against_none(e)[1] for e in ("friction_coefficient", "mass_scale")]
     merged = merge_changes(props)
     for ch in props + [merged]:
-        assert ch.get("release_speed", [0.0, 0.0])[1] == 0.0 and ch["episodes"] == 25
+        assert ch.get("release_speed", [0.0, 0.0])[1] == 0.0
+        assert ch["episodes"] == FOLLOW_UP_EPISODES
     assert merged["peak_accel"][0] >= 8.0
     # a free-ball effect still asks for coasts
     assert against_none("viscous_damping")[1]["release_speed"][1] > 0
@@ -295,7 +297,7 @@ def test_a_model_without_side_contact_is_proposed_top_pushes_not_strikes():
     fric = judged["separating_excitation"][0]
     assert "strike_fraction" not in fric["excitation"]
     assert fric["excitation"]["press"] == LIGHT_PRESS[1]["press"]
-    assert fric["excitation"]["episodes"] == 25          # the longer recording kept
+    assert fric["excitation"]["episodes"] == FOLLOW_UP_EPISODES   # the longer recording kept
     assert "instead of strikes" in fric["change"]
     assert judged["separating_excitation"][1] == coast
     Excitation().changed(**fric["excitation"])
@@ -375,4 +377,4 @@ def test_mass_asks_for_head_on_strikes_and_a_merge_keeps_friction_s_glancing_one
     top_pushes_only(judged)
     ex = judged["separating_excitation"][0]["excitation"]
     assert "strike_fraction" not in ex and "strike_angle" not in ex and "press" not in ex
-    assert ex["peak_accel"] == [8.0, 12.0] and ex["episodes"] == 25
+    assert ex["peak_accel"] == [8.0, 12.0] and ex["episodes"] == FOLLOW_UP_EPISODES
