@@ -378,3 +378,10 @@ def test_mass_asks_for_head_on_strikes_and_a_merge_keeps_friction_s_glancing_one
     ex = judged["separating_excitation"][0]["excitation"]
     assert "strike_fraction" not in ex and "strike_angle" not in ex and "press" not in ex
     assert ex["peak_accel"] == [8.0, 12.0] and ex["episodes"] == FOLLOW_UP_EPISODES
+    # the head-on angles read back as a tuple (an Excitation field) are the same strikes
+    tup = proposal(["mass_scale", "none"], against_none("mass_scale"))
+    tup["excitation"]["strike_angle"] = tuple(tup["excitation"]["strike_angle"])
+    judged = dict(separating_excitation=[tup])
+    top_pushes_only(judged)
+    assert "press" not in judged["separating_excitation"][0]["excitation"]
+    assert judged["separating_excitation"][0]["change"].endswith("pushes only, no strikes")

@@ -146,7 +146,8 @@ def top_pushes_only(judged) -> None:
         ex = p.get("excitation", {})
         if ex.pop("strike_fraction", None) is None:
             continue
-        if ex.pop("strike_angle", None) == HEAD_ON["strike_angle"]:   # pushes alone instead
+        angle = ex.pop("strike_angle", None)
+        if angle is not None and list(angle) == list(HEAD_ON["strike_angle"]):   # pushes alone
             p["change"] += ("; this model cannot follow a contact on the ball's side, so "
                             "pushes only, no strikes")
             continue
