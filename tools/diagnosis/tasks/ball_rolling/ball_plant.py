@@ -91,9 +91,13 @@ def proximity_properties(stiffness: float, relaxation_time: float, mu: float):
     return props
 
 
-def build_ball_plant(w: BallWorld, copies: int = 1, add_systems=None) -> BallPlant:
+def build_ball_plant(w: BallWorld, copies: int = 1, add_systems=None,
+                     sampled_outputs: bool = True) -> BallPlant:
     """The world's diagram (see the module doc). add_systems(builder, plant, ball_bodies):
-    a hook that adds systems (e.g. force elements) before the diagram is built."""
+    a hook that adds systems (e.g. force elements) before the diagram is built.
+    sampled_outputs False: the plant's output ports are computed when read instead of
+    stored at every step (MultibodyPlantConfig.use_sampled_output_ports); the same
+    states, less work per step, for a caller that reads only the state."""
     from pydrake.geometry import Box, Sphere
     from pydrake.math import RigidTransform
     from pydrake.multibody.plant import AddMultibodyPlant, MultibodyPlantConfig
@@ -101,8 +105,8 @@ def build_ball_plant(w: BallWorld, copies: int = 1, add_systems=None) -> BallPla
     from pydrake.systems.framework import DiagramBuilder
     builder = DiagramBuilder()
     plant, _ = AddMultibodyPlant(MultibodyPlantConfig(
-        time_step=w.time_step, discrete_contact_approximation="sap", contact_model="point"),
-        builder)
+        time_step=w.time_step, discrete_contact_approximation="sap", contact_model="point",
+        use_sampled_output_ports=sampled_outputs), builder)
 
     def props(m):
         return proximity_properties(w.stiffness, w.relaxation_time, m)

@@ -43,7 +43,8 @@ class Batch:
         self._replace = RoleAssign.kReplace
         built = replace(world, table_z=0.0)
         hook = add_ball_forces(built, BallForceCoefficients()) if with_forces else None
-        self.bp = bp = build_ball_plant(built, copies, add_systems=hook)
+        self.bp = bp = build_ball_plant(built, copies, add_systems=hook,
+                                        sampled_outputs=False)     # only states are read
         self.ctx = bp.diagram.CreateDefaultContext()
         self.pctx = bp.plant.GetMyMutableContextFromRoot(self.ctx)
         self.sg = bp.diagram.GetSubsystemByName("scene_graph")
