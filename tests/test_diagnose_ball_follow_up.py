@@ -50,7 +50,7 @@ def test_every_proposal_is_a_gait_change():
         assert text and change
         Excitation().changed(**change)
     text, change = with_more_of_everything(MORE_EVIDENCE["contact_offset"])
-    assert change["touchdown_s"] == 0.4 and change["episodes"] == FOLLOW_UP_EPISODES     # its own + more
+    assert change["touchdown_s"] == 0.4 and change["episodes"] == FOLLOW_UP_EPISODES   # its own + more
 
 
 def test_a_push_effect_against_none_asks_for_pushes_that_end_at_rest():
