@@ -27,8 +27,9 @@ from adaptive_c3.tools.diagnosis.tasks.ball_rolling.ball_plant import (
     BallWorld, build_ball_plant, proximity_properties)
 
 COPIES = 16               # at most this many windows per plant (a job): ~34 us CPU per
-                          # window and SAP step (52 copies: ~41 us, SAP iterates one
-                          # problem until its worst window converges; 4 copies: ~37 us)
+                          # window and SAP step with sampled output ports, ~24-27 us
+                          # without (52 copies: ~41 us, SAP iterates one problem until
+                          # its worst window converges; 4 copies: ~37 us; both sampled)
 Z_ROWS = (2, 9)           # recording rows of the EE and ball z (shifted by the table height)
 _BATCHES: OrderedDict = OrderedDict()    # per process: Batch.key -> Batch
 _KEEP_BATCHES = 2 * COPIES   # every chunk size 1..COPIES, with and without forces
