@@ -288,7 +288,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     left_out = size_test_problem(prob, WH, foldH, keep, es)
     left_none = functools.cache(lambda: evaluate(left_out, None))   # `none` there, once
     if any(chosen is f for f in fits):     # judged on all windows (not the free ones)
-        confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG)
+        confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG, prob, nuisance)
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
                  size_prob=left_out, size_none=left_none, part_of_row=rec.extras.get("part"))
     shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift)

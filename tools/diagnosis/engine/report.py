@@ -167,6 +167,12 @@ def ambiguity_summary(report) -> str:
                 f"{c['name']} beats the unmodified model there (cluster z "
                 f"{c['z_vs_none']:.2f}, {100 * c['reduction']:.1f}% less error), so `none` "
                 f"is not kept beside it.")
+    elif c and c.get("nuisance_rivals"):         # computed only when it beat `none`
+        r = min(c["nuisance_rivals"], key=lambda r: r["z_effect_vs_it"])
+        out += (f" Not confirmed: {c['name']} beats the unmodified model on "
+                f"{c['windows']} held-out windows (cluster z {c['z_vs_none']:.2f}), but the "
+                f"nuisance {r['name']}, fitted as it was, explains that gain as well (z "
+                f"{r['z_effect_vs_it']:.2f} for the effect against it), so `none` stays.")
     for b in (b for b in report.get("beyond_size", []) if b["beyond"]):
         out += (f" Beyond its size that matters on held-out windows the fit never used: "
                 f"{b['name']} = {_fmt(b['value'])} beats both the unmodified model (cluster "
