@@ -107,17 +107,25 @@ def test_a_row_keeps_why_each_member_joined_and_the_size_tests():
 
 
 def test_the_summary_counts_the_confirmations_on_the_left_out_windows():
-    """Tested, confirmed, and confirmed on the true effect (a pair holding it counts)."""
+    """Tested, confirmed, and confirmed on the true effect (a pair holding it counts);
+    stopped by a nuisance rival (a failed test that holds rivals: it beat `none`), and
+    stopped while it held the truth."""
     rows = [_row("mass_scale", "named", True), _row("mass_scale", "ambiguous", False, True),
             _row("viscous_damping", "named", True), _row("none", "named", False),
-            _row("none", "named", True)]
-    conf = [("mass_scale[ball]", True), ("mass_scale[ball]", False),
-            ("contact_offset[ee_ball] + viscous_damping[ball]", True),
-            ("contact_offset[ee_ball]", True), None]
+            _row("none", "named", True), _row("friction_coefficient", "ambiguous", False, True),
+            _row("friction_coefficient", "ambiguous", False, True)]
+    rows[-1]["truth"]["target"] = "ee_ball"
+    rival = [dict(name="actuator_delay", z_effect_vs_it=0.5, z_it_vs_none=2.2)]
+    conf = [("mass_scale[ball]", True, []), ("mass_scale[ball]", False, []),
+            ("contact_offset[ee_ball] + viscous_damping[ball]", True, []),
+            ("contact_offset[ee_ball]", True, []), None,
+            ("mass_scale[ball]", False, rival), ("friction_coefficient[ee_ball]", False, rival)]
     for r, c in zip(rows, conf):
-        r["confirmation"] = c and dict(name=c[0], confirmed=c[1], z_vs_none=2.5)
-    assert summarise(rows)["confirmations"] == dict(tested=4, confirmed=3,
-                                                    confirmed_the_truth=2)
+        r["confirmation"] = c and dict(name=c[0], confirmed=c[1], z_vs_none=2.5,
+                                       nuisance_rivals=c[2])
+    assert summarise(rows)["confirmations"] == dict(
+        tested=6, confirmed=3, confirmed_the_truth=2, stopped_by_nuisance=2,
+        stopped_the_truth=1)
 
 
 def test_the_summary_counts_the_beyond_size_tests():

@@ -25,7 +25,8 @@ diagnosed and scored:
   size_tests     every such test: the effect, the sizes tried and their z against `none`
                  (with a follow-up also each recording's alone: `by_recording`)
   confirmation   the chosen effect against `none` on the windows the fit left out, where
-                 `none` had joined it (engine/boundary.py confirm_on_left_out)
+                 `none` had joined it (engine/boundary.py confirm_on_left_out), and
+                 against each nuisance the fit did not keep (`nuisance_rivals`)
   below_size     the effect(s) of an answer (named, or an ambiguous set) whose every
                  interval lay within its size that matters, answered `none` instead
                  (engine/boundary.py below_size)
@@ -141,12 +142,20 @@ def _summary(rows) -> dict:
 def _confirmations(rows) -> dict:
     """How often a chosen effect was tested against `none` on the left-out windows
     (engine/boundary.py confirm_on_left_out), confirmed, and confirmed while it held the
-    true effect (a pair counts when one of its members is the truth)."""
+    true effect (a pair counts when one of its members is the truth); and how often one
+    that beat `none` there was stopped by a nuisance it did not beat (nuisance_rivals),
+    and of those how often it held the truth."""
+    def on_truth(r):
+        return _label(r["truth"]["name"], r["truth"]["target"]) in \
+            r["confirmation"]["name"].split(" + ")
     tested = [r for r in rows if r.get("confirmation")]
     ok = [r for r in tested if r["confirmation"]["confirmed"]]
-    on_truth = [r for r in ok if _label(r["truth"]["name"], r["truth"]["target"]) in
-                r["confirmation"]["name"].split(" + ")]
-    return dict(tested=len(tested), confirmed=len(ok), confirmed_the_truth=len(on_truth))
+    stopped = [r for r in tested if not r["confirmation"]["confirmed"]
+               and r["confirmation"].get("nuisance_rivals")]
+    return dict(tested=len(tested), confirmed=len(ok),
+                confirmed_the_truth=sum(map(on_truth, ok)),
+                stopped_by_nuisance=len(stopped),
+                stopped_the_truth=sum(map(on_truth, stopped)))
 
 
 def answer_line(summary) -> str:
