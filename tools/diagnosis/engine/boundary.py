@@ -188,9 +188,9 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float, prob
     if size_prob is None or chosen is None or len(amb) < 2 or \
             not any(a["name"] == "none" for a in amb) or amb[0]["name"] == "none":
         return
-    score = against_none(size_prob, chosen, size_none)
+    score, effect_c = _against_none(size_prob, chosen, size_none)
     ok = bool(score["z_vs_none"] >= z_bar)
-    rivals = nuisance_rivals(prob, chosen, size_prob, size_none, nuisance) \
+    rivals = nuisance_rivals(prob, chosen, effect_c, size_prob, size_none, nuisance) \
         if ok and prob is not None else []
     ok = ok and all(r["z_effect_vs_it"] >= z_bar for r in rivals)
     judged["confirmation"] = dict(name=chosen.label(), confirmed=ok, **score,
@@ -205,11 +205,12 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float, prob
         judged.update(verdict="named", ambiguous=[], separating_excitation=[])
 
 
-def nuisance_rivals(prob, chosen, size_prob, size_none, nuisance) -> list:
+def nuisance_rivals(prob, chosen, effect_c, size_prob, size_none, nuisance) -> list:
     """[{name, z_effect_vs_it, z_it_vs_none}]: each nuisance of prob.spec.nuisance that the
     fit did not keep (`nuisance`: the kept fits), fitted on prob's windows as the chosen
     effect was (cv_fit: fold values), and scored on the left-out windows against the
-    chosen effect and against `none` (cluster z; positive: the first is better). A gain
+    chosen effect (effect_c: its per-cluster SSR there) and against `none` (cluster z;
+    positive: the first is better). A gain
     on the left-out windows that an unkept nuisance also gives is no evidence for the
     effect: on development draw 90400 (EE-ball mu 0.30, Drake's plant) a mass of 2.2x,
     its interval holding 1, was confirmed at z 2.2 while an actuator delay the fit had
@@ -217,7 +218,6 @@ def nuisance_rivals(prob, chosen, size_prob, size_none, nuisance) -> list:
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     from adaptive_c3.tools.diagnosis.engine.fit import cv_fit
     kept = {f.cands[0] for f in nuisance}
-    _, _, effect_c, _ = evaluate(size_prob, chosen)
     out = []
     for name, target in getattr(prob.spec, "nuisance", ()):
         c = Candidate(name, target)
@@ -254,11 +254,15 @@ def left_out_scores(judged, fits, size_prob, size_none) -> None:
 def against_none(prob, fit, none_eval) -> dict:
     """{z_vs_none, reduction} of `fit` (its fold values) against the unmodified model over
     prob's held-out clusters; none_eval(): `none`'s evaluation there."""
-    from adaptive_c3.tools.diagnosis.engine.fit import evaluate
+    return _against_none(prob, fit, none_eval)[0]
+
+
+def _against_none(prob, fit, none_eval):
+    """(against_none's dict, the fit's per-cluster SSR there)."""
     none_ssr, _, none_c, _ = none_eval()
     ssr, _, per_c, _ = evaluate(prob, fit)
     return dict(z_vs_none=float(cluster_z(none_c, per_c, prob.z_stat)),
-                reduction=float(1.0 - ssr / none_ssr))
+                reduction=float(1.0 - ssr / none_ssr)), per_c
 
 
 def size_that_matters(spec, cand):
