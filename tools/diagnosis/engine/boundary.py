@@ -182,8 +182,8 @@ def confirm_on_left_out(judged, chosen, size_prob, size_none, z_bar: float, prob
 
     prob, nuisance (the fit problem and the nuisance fits it kept): the gain must also
     be the effect's rather than a nuisance's the fit did not keep (nuisance_rivals):
-    the effect must beat each such nuisance there at z >= z_bar. A rival is not required
-    to beat `none` itself: on 90400 the delay that stopped a wrong mass read z 1.8."""
+    the effect must beat each such nuisance there at z >= z_bar, whether or not that
+    nuisance beats `none` itself (see nuisance_rivals: 90400's rival read z 1.8)."""
     amb = judged.get("ambiguous") or []
     if size_prob is None or chosen is None or len(amb) < 2 or \
             not any(a["name"] == "none" for a in amb) or amb[0]["name"] == "none":

@@ -47,11 +47,11 @@ from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import (
 SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is 0
 # Rollouts are nearly all of a diagnosis's time (SAP: ~34 us per window and step; ~24-27
 # us with unsampled output ports): half the step would cut the 15-episode bench
-# diagnosis from 53-63 s to 40-42 s on a machine whose
-# machine/python row reads 62 ms, but a draw's true parameters then reproduce a harness
-# recording worse (10-step rollouts 0.47 of the noise off against 0.27, draw 8000), and on
-# the twenty-seventh evaluation set, run at half the step, the left-out confirmation named
-# a mass on draws whose truth was another effect or none (docs/diagnosis.md)
+# diagnosis from 53-63 s to 40-42 s on a machine whose machine/python row reads 62 ms,
+# but a draw's true parameters then reproduce a harness recording worse (10-step rollouts
+# 0.47 of the noise off against 0.27, draw 8000), and on the twenty-seventh evaluation
+# set, run at half the step, the left-out confirmation named a mass on draws whose truth
+# was another effect or none (docs/diagnosis.md)
 FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
 CACHE_MODELS = 400        # rollouts kept for this many parameter sets (a diagnosis asks
