@@ -150,3 +150,20 @@ def test_the_summary_counts_sizes_ruled_out_by_one_recording_alone():
     rows[2]["size_tests"] = [dict(name="mass_scale[ball]", excluded=False, tested=[
         dict(value=2.0, z_vs_none=-0.99, by_recording=[-1.5, 0.4], bar=2.13)])]
     assert summarise(rows)["excluded_by_one_recording"] == 1
+
+
+def test_the_summary_counts_the_rivals_dropped_on_the_left_out_windows():
+    """Draws with a left-out rival test, the rivals dropped, and those that were the
+    truth (a drag dropped where the truth was a drag)."""
+    rows = [_row("viscous_damping", "named", True), _row("viscous_damping", "named", True),
+            _row("rolling_resistance", "ambiguous", False, True), _row("none", "named", True)]
+    rows[2]["truth"]["target"] = "ball_table"
+
+    def rival(name, dropped):
+        return dict(name=name, beaten_by="x", z=2.5, bar=2.24, dropped=dropped, windows=300)
+    rows[0]["left_out_rivals"] = [rival("rolling_resistance[ball_table]", True)]
+    rows[1]["left_out_rivals"] = [rival("viscous_damping[ball]", True),
+                                  rival("mass_scale[ball]", True)]
+    rows[2]["left_out_rivals"] = [rival("rolling_resistance[ball_table]", False)]
+    assert summarise(rows)["left_out_rivals"] == dict(tested=3, dropped=3,
+                                                      dropped_the_truth=1)

@@ -48,6 +48,7 @@ from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuis
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
                                                          confirm_on_left_out,
                                                          left_out_scores, size_test_problem)
+from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
@@ -192,7 +193,7 @@ def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
                 windows=int(len(err)))
 
 
-def long_problem(rec, spec, prob, P0, sigma, stride: int):
+def long_problem(rec, spec, prob, P0, sigma, stride: int, left_out_stride: int = 0):
     """prob's fit problem with FREE_HORIZON-step rollouts (the free-ball effects' fits;
     None for models without free-ball windows or recordings too short for them). Every
     `stride`-th window, or, for a spec with `free_fit_windows`, about that many of the
@@ -201,14 +202,17 @@ def long_problem(rec, spec, prob, P0, sigma, stride: int):
     few of them (development draw 90106, 3.7 mm: 99 % of the fit's information in 4 of
     33 free windows; its jackknife interval reached below 0). On development draws 90132
     and 90228 (3.3 and 2.35 mm) the denser free windows named the resistance after one
-    follow-up, where the sparse ones left `none` beside it (docs/diagnosis.md)."""
+    follow-up, where the sparse ones left `none` beside it (docs/diagnosis.md).
+
+    left_out_stride > 0: (that problem, every left_out_stride-th window it left out, as
+    boundary.size_test_problem; None where it kept all) instead."""
     from adaptive_c3.tools.diagnosis.engine.evidence import FREE_HORIZON, FREE_PHASES
     if not getattr(spec, "free_ball", False):
-        return None
+        return (None, None) if left_out_stride else None
     try:
         W = make_windows(rec, FREE_HORIZON)
     except ValueError:
-        return None
+        return (None, None) if left_out_stride else None
     fold, _ = fold_ids(rec, W)
     target = getattr(spec, "free_fit_windows", None)
     if target:
@@ -218,7 +222,10 @@ def long_problem(rec, spec, prob, P0, sigma, stride: int):
     else:
         keep = np.arange(len(W)) % stride == 0
     floor = prediction_floor(P0, sigma, FREE_HORIZON)
-    return Problem(spec, list(prob.base), W.take(keep), fold[keep], fit_weight(spec) / floor)
+    out = Problem(spec, list(prob.base), W.take(keep), fold[keep], fit_weight(spec) / floor)
+    if not left_out_stride:
+        return out
+    return out, size_test_problem(out, W, fold, keep, left_out_stride)
 
 
 def in_windows(W, windows, rec) -> np.ndarray:
@@ -269,9 +276,11 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     windows, steps = locate(rec, spec, P0, W1, WH, floor, smooth=horizon)
     bar.update(2)
     chosen, fits, none_eval = select(prob, cands, progress=bar, pairs=pairs, offset=2)
+    es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
+    free_prob, free_left_out = long_problem(rec, spec, prob, P0, sigma, stride, es)
     chosen, judged, fits_free, (scored, none_scored) = free_ball_verdict(
         prob, cands, chosen, fits, none_eval, getattr(spec, "min_reduction", MIN_REDUCTION),
-        free_prob=long_problem(rec, spec, prob, P0, sigma, stride))
+        free_prob=free_prob)
     if any(chosen is f for f in fits):    # a calibration may have taken up part of it
         refit_with_calibration(prob, chosen, nuisance, none_eval)
         base = list(prob.base)
@@ -284,7 +293,6 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     require_support(judged, spec, chosen, fits, none_eval, shift)    # the widened interval
     if below_size(judged, spec, chosen, [*fits_free, *fits], shift):    # too small to matter
         chosen = None
-    es = int(getattr(spec, "eval_stride", 1))     # costly models: every es-th window
     left_out = size_test_problem(prob, WH, foldH, keep, es)
     left_none = functools.cache(lambda: evaluate(left_out, None))   # `none` there, once
     if any(chosen is f for f in fits):     # judged on all windows (not the free ones)
@@ -295,6 +303,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if shown is not None and shown is not chosen:     # named: beyond its size there
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)
+    lead = rivals_on_left_out(judged, chosen, fits, fits_free, left_out, free_left_out)
+    if lead is not None:             # the chosen effect fell to one fitted as it was
+        chosen = lead
+        widen(scored, none_scored, chosen, judged, user_base, nuisance)
     left_out_scores(judged, fits, left_out, left_none)
     if not getattr(spec, "side_contact", False):
         top_pushes_only(judged)

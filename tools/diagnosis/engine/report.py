@@ -128,7 +128,7 @@ def _judged(result) -> dict:
                                      ambiguous=[], separating_excitation=[])
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
                               "size_tests", "confirmation", "left_out", "below_size",
-                              "beyond_size")
+                              "beyond_size", "left_out_rivals")
             if k in j}
 
 
@@ -178,6 +178,12 @@ def ambiguity_summary(report) -> str:
                 f"{b['name']} = {_fmt(b['value'])} beats both the unmodified model (cluster "
                 f"z {b['z_vs_none']:.2f}) and the model fixed at {_fmt(b['size'])} (z "
                 f"{b['z_vs_size']:.2f}), so `none` is not kept beside it.")
+    gone = [r for r in report.get("left_out_rivals", []) if r["dropped"]]
+    if gone:
+        out += (" Clearly worse than another effect of the set on held-out windows the "
+                "fit never used, so not kept: "
+                + ", ".join(f"{r['name']} (against {r['beaten_by']}: cluster z "
+                            f"{r['z']:.2f} on {r['windows']} windows)" for r in gone) + ".")
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "

@@ -35,6 +35,9 @@ diagnosed and scored:
   beyond_size    each member beside `none` whose value lies beyond its size: its fit
                  against `none` and against the size there, and whether `none` left
                  (engine/boundary.py beyond_size)
+  left_out_rivals  each effect beside the chosen one: the chosen fit against it on the
+                 windows the fit left out, and whether it left the set
+                 (engine/left_out_rivals.py)
   ambiguous_notes  per member of the ambiguous set, why it joined (its `note`, e.g. "not
                  excluded: its fit is worse than `none` ...", or require_support's
                  `reason`: the chosen effect's interval holds the model's value)
@@ -128,6 +131,9 @@ def _summary(rows) -> dict:
         beyond_size=dict(tested=count(lambda r: r.get("beyond_size")),
                          none_out=count(lambda r: any(t["beyond"] for t in
                                                       r.get("beyond_size") or []))),
+        # rivals of the chosen effect tested on the left-out windows, dropped, and
+        # dropped while they were the truth (engine/left_out_rivals.py)
+        left_out_rivals=_left_out_rivals(rows),
         # answers with a size ruled out by one recording alone, not the pooled test
         # (boundary.excluded; `bar`: the one the 1 + k tests share, evidence.size_z)
         excluded_by_one_recording=count(lambda r: any(
@@ -156,6 +162,17 @@ def _confirmations(rows) -> dict:
                 confirmed_the_truth=sum(map(on_truth, ok)),
                 stopped_by_nuisance=len(stopped),
                 stopped_the_truth=sum(map(on_truth, stopped)))
+
+
+def _left_out_rivals(rows) -> dict:
+    """Draws where rivals of the chosen effect were tested on the left-out windows, the
+    rivals dropped there, and of those how many were the true effect."""
+    tested = [r for r in rows if r.get("left_out_rivals")]
+    gone = [(r, x) for r in tested for x in r["left_out_rivals"] if x["dropped"]]
+    return dict(tested=len(tested), dropped=len(gone),
+                dropped_the_truth=sum(x["name"] == _label(r["truth"]["name"],
+                                                          r["truth"]["target"])
+                                      for r, x in gone))
 
 
 def answer_line(summary) -> str:

@@ -422,7 +422,7 @@ def judged_fields(result, truth) -> dict:
                 below_size=[x["name"] for x in j.get("below_size", [])],
                 size_tests=list(j.get("size_tests", [])),
                 confirmation=j.get("confirmation"), left_out=j.get("left_out"),
-                beyond_size=j.get("beyond_size"),
+                beyond_size=j.get("beyond_size"), left_out_rivals=j.get("left_out_rivals"),
                 ambiguous_notes=[a.get("note") or a.get("reason", "")
                                  for a in j.get("ambiguous", [])],
                 held_out_ci=getattr(result.get("chosen"), "held_out_ci", None),

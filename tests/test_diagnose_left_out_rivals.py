@@ -1,0 +1,120 @@
+"""Issue 30: a rival effect that ties with the chosen one on a sparse fit's windows leaves
+the ambiguous set when the windows the fit left out show it clearly worse, and stays when
+it is the better one there (engine/left_out_rivals.py)."""
+import copy
+
+import numpy as np
+
+from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
+from adaptive_c3.tools.diagnosis.backends.effects import Candidate
+from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
+from adaptive_c3.tools.diagnosis.engine.evidence import verdict
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, evaluate, paired_z
+from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
+from adaptive_c3.tools.diagnosis.engine.locate import Windows
+from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
+from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
+
+FRICTION = Candidate("friction_coefficient", "ee_ball")
+MASS = Candidate("mass_scale", "ball")
+
+
+class TwinProblem(Problem):
+    """Windows whose residual is the gap between the model's and the data's slip. The
+    model slips at min(EE-ball mu, 2 - mass scale) on windows whose index // 2 is even
+    (every 40th window, the sparse fit's, is one), at the mu alone elsewhere: a mass of
+    1.5 mimics mu 0.5 on the fit's windows and on half of those it leaves out. The data
+    slip as the model with `truth` ({"mu": .., "mass": ..})."""
+
+    def __init__(self, spec, truth: dict, windows: int = 1200):
+        n = windows
+        W = Windows(np.zeros((n, 19)), np.zeros((n, 2, 19)), np.zeros((n, 3, 3)),
+                    np.arange(n) * 10, np.arange(n) // 12, np.arange(n) * 0.1)
+        super().__init__(spec, [], W, np.arange(n) % 3, np.ones((2, 19)), cluster_steps=50)
+        self.noise = np.random.default_rng(5).normal(0.0, 1.0, (n, 2, 19))
+        self.truth = truth
+
+    @staticmethod
+    def _slip(idx, mu, mass):
+        twin = (idx // 2) % 2 == 0
+        return np.maximum(0.8 - np.where(twin, np.minimum(mu, 2.0 - mass), mu), 0.0)
+
+    def residuals(self, effects, W):
+        value = {c.name: float(v[0]) for c, v in effects}
+        idx = W.row // 10
+        gap = self._slip(idx, value.get("friction_coefficient", 1.0),
+                         value.get("mass_scale", 1.0)) - \
+            self._slip(idx, self.truth.get("mu", 1.0), self.truth.get("mass", 1.0))
+        return self.noise[idx] + 2.0 * gap[:, None, None]
+
+
+def _fit(prob, cand, value, none_eval):
+    f = Fit((cand,), np.array([value]), np.array([[value - 0.1, value + 0.1]]),
+            np.array([0.05]), 0.0)
+    f.test_ssr, f.test_n, f.test_cluster_ssr, _ = evaluate(prob, f)
+    f.reduction = 1.0 - f.test_ssr / none_eval[0]
+    f.z_vs_none = paired_z(none_eval[2], f.test_cluster_ssr)
+    f.score = f.test_ssr
+    return f
+
+
+def _judged(truth: dict):
+    """(judged, friction fit, mass fit, left-out problem): the fit problem on every 40th
+    of 1200 windows, the left-out one every 2nd of the rest; mu 0.5 chosen, mass 1.5 its
+    rival on the fit's windows."""
+    full = TwinProblem(ball_spec(load_scenario(str(SCENARIO_DIR / "ball_rolling.yaml"))[0]),
+                       truth)
+    keep = np.arange(1200) % 40 == 0
+    prob = copy.copy(full)
+    prob.windows, prob.fold = full.windows.take(keep), full.fold[keep]
+    left_out = size_test_problem(prob, full.windows, full.fold, keep, 2)
+    none_eval = evaluate(prob, None)
+    fric, mass = _fit(prob, FRICTION, 0.5, none_eval), _fit(prob, MASS, 1.5, none_eval)
+    fric.score -= 1e-9                    # they tie on the fit's windows: mu is chosen
+    judged = verdict([fric, mass], fric, none_eval, 0.001)
+    return judged, fric, mass, left_out
+
+
+def test_a_rival_the_left_out_windows_show_clearly_worse_leaves_the_set():
+    """The data slip at mu 0.5 everywhere: on the fit's windows mass 1.5 gives the same
+    slip, so it stays beside mu (verdict); on half of the 570 left-out windows it gives
+    none, so it is clearly worse there and leaves: the answer names mu, the report says
+    why."""
+    judged, fric, mass, left_out = _judged({"mu": 0.5})
+    assert fric.z_vs_none >= 2.0 and mass.z_vs_none >= 2.0
+    assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "mass_scale"]
+    rivals_on_left_out(judged, fric, [fric, mass], [], left_out)
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    gone, kept = r["mass_scale[ball]"], r["friction_coefficient[ee_ball]"]
+    assert gone["dropped"] and gone["beaten_by"] == "friction_coefficient[ee_ball]"
+    assert gone["windows"] == 570 and gone["z"] >= gone["bar"] >= 2.0
+    assert not kept["dropped"] and kept["z"] < 0.0
+    assert judged["verdict"] == "named" and judged["ambiguous"] == []
+    assert judged["separating_excitation"] == []
+    assert "so not kept: mass_scale[ball] (against friction" in ambiguity_summary(judged)
+
+
+def test_a_chosen_effect_the_left_out_windows_show_clearly_worse_gives_way():
+    """The data slip as a ball 1.5x heavy (only on the twin windows): mu 0.5 ties with it
+    on the fit's windows and is chosen, but on the left-out windows it slips where the
+    data do not, so the mass beats it there: mu leaves and the answer names the mass."""
+    judged, fric, mass, left_out = _judged({"mass": 1.5})
+    assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "mass_scale"]
+    lead = rivals_on_left_out(judged, fric, [fric, mass], [], left_out)
+    assert lead is mass
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    assert r["friction_coefficient[ee_ball]"]["dropped"]
+    assert not r["mass_scale[ball]"]["dropped"]
+    assert judged["verdict"] == "named" and judged["ambiguous"] == []
+
+
+def test_two_effects_the_left_out_windows_cannot_tell_apart_both_stay():
+    """Left-out windows that are all twins (where mass 1.5 slips as mu 0.5 does): the two
+    fits give the same error there, so neither leaves and the verdict stays ambiguous."""
+    judged, fric, mass, left_out = _judged({"mu": 0.5})
+    twin = ((left_out.windows.row // 10) // 2) % 2 == 0
+    left_out.windows, left_out.fold = left_out.windows.take(twin), left_out.fold[twin]
+    assert rivals_on_left_out(judged, fric, [fric, mass], [], left_out) is None
+    assert all(not r["dropped"] and abs(r["z"]) < 1e-9 for r in judged["left_out_rivals"])
+    assert judged["verdict"] == "ambiguous"
+    assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "mass_scale"]
