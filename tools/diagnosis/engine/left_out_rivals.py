@@ -71,7 +71,7 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
     n_stats = max(1 if problem(f, g).z_stat == "paired" else 2
                   for i, (_, f, _) in enumerate(members) for _, g, _ in members[i + 1:])
     bar = worse_z(LOOKS * (len(members) - 1) * n_stats)
-    out, dropped, beaten_by = [], [], {}
+    out, dropped = [], []
     for row, f, family in members:
         best = None                                    # (z, fit) of its strongest rival
         for _, g, g_family in members:
@@ -89,13 +89,12 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
                         bar=float(bar), dropped=gone, windows=int(np.sum(best[2].fold >= 0))))
         if gone:
             dropped.append(row)
-            beaten_by[id(f)] = best[1]
     judged["left_out_rivals"] = out
     if not dropped:
         return None
     kept = [a for a in amb if not any(a is d for d in dropped)]
     lead, lead_row = chosen, next(a for a, f, _ in members if f is chosen)
-    if id(chosen) in beaten_by:         # the chosen one fell: the best kept of its kind
+    if any(lead_row is d for d in dropped):    # the chosen one fell: the best kept of its kind
         family = next(k for _, f, k in members if f is chosen)
         same = [(a, f) for a, f, k in members if k == family and any(a is b for b in kept)]
         if same:
