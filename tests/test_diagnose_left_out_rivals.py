@@ -9,8 +9,9 @@ from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
 from adaptive_c3.tools.diagnosis.engine.evidence import verdict
-from adaptive_c3.tools.diagnosis.engine.fit import Fit, Problem, evaluate, paired_z
-from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
+from adaptive_c3.tools.diagnosis.engine.fit import (Fit, Problem, evaluate, paired_z,
+                                                  signed_rank_z)
+from adaptive_c3.tools.diagnosis.engine.left_out_rivals import beaten_z, rivals_on_left_out
 from adaptive_c3.tools.diagnosis.engine.locate import Windows
 from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
 from adaptive_c3.tools.diagnosis.tasks.ball_rolling.effects_ball import ball_spec
@@ -118,3 +119,28 @@ def test_two_effects_the_left_out_windows_cannot_tell_apart_both_stay():
     assert all(not r["dropped"] and abs(r["z"]) < 1e-9 for r in judged["left_out_rivals"])
     assert judged["verdict"] == "ambiguous"
     assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "mass_scale"]
+
+
+def test_two_statistics_must_both_put_an_effect_beyond_the_bar():
+    """Judged by the paired z and the ranks (the free windows of Drake's plant), an effect
+    is beaten only as clearly as the weaker of the two says: 30 clusters where the rival
+    is better by 1 and 10 where it is worse by 1.1 give a paired z near 3.3 but a rank z
+    below 1 (the losses are the largest differences), so the effect is not beaten beyond
+    the two-member bar (2.0); by the paired z alone it is."""
+    f_c = np.full(40, 5.0)
+    g_c = f_c - np.r_[np.full(30, 1.0), np.full(10, -1.1)]
+    assert beaten_z(f_c, g_c, "paired") > 3.0
+    assert beaten_z(f_c, g_c, "signed_rank") < 1.0
+    assert beaten_z(f_c, g_c, "signed_rank") == min(paired_z(f_c, g_c),
+                                                    signed_rank_z(f_c, g_c))
+
+
+def test_a_clear_loss_by_both_statistics_still_drops_the_rival():
+    """On the twin windows judged by ranks as well: the mass is clearly worse by both
+    statistics on the left-out windows, so it leaves as it does by the paired z alone."""
+    judged, fric, mass, left_out = _judged({"mu": 0.5})
+    left_out.z_stat = "signed_rank"
+    rivals_on_left_out(judged, fric, [fric, mass], [], left_out)
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    assert r["mass_scale[ball]"]["dropped"] and r["mass_scale[ball]"]["z"] >= 2.0
+    assert judged["verdict"] == "named"

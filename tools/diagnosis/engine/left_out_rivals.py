@@ -20,13 +20,19 @@ rollouts (on 0.1 s ones the two part too little: 100720, 100728 and 100839, drag
 effect that another is clearly better than there leaves the set, the chosen one too: on
 development draw 100518 (a table offset of -1.3 mm) the EE-ball offset was chosen and
 the table's, beside it, beat it at z 11 on the left-out windows. The bar is
-evidence.worse_z over the tests that could drop any one effect (the other members,
-times the statistics) and the two looks (the fit's clusters, then these), so the truth
-leaves the set in at most 5 % of diagnoses across both. The chosen effect leaves only
+evidence.worse_z over the tests that could drop any one effect (the other members) and
+the two looks (the fit's clusters, then these), so the truth leaves the set in at most
+5 % of diagnoses across both. Where a pair is judged by two statistics (the paired z and
+the ranks, on the free windows), an effect leaves only when both put it beyond the bar
+(an intersection-union test: no share of the 5 % between them). Taking either, with the
+5 % shared, dropped the truth on the thirtieth set's 100935 (a rolling resistance of
+3.2 mm, beaten by a drag at paired z 2.49 but rank z 1.92, bar 2.24: the two fits' error
+on the left-out free windows differed by 0.5 % of what either explained) and left a
+confident wrong drag. The chosen effect leaves only
 for one fitted on the same windows (both free-ball fits or both not), which then leads
 the answer. `none` is no member here (boundary.confirm_on_left_out and beyond_size judge
 it). Recorded as judged["left_out_rivals"]: each member the test dropped or kept, with
-the z of the member that beat it most (positive: that one is better).
+the z (beaten_z) of the member that beat it most (positive: that one is better).
 """
 from __future__ import annotations
 
@@ -68,9 +74,7 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
             per_c[id(prob), id(f)] = evaluate(prob, f)[2]
         return per_c[id(prob), id(f)]
 
-    n_stats = max(1 if problem(f, g).z_stat == "paired" else 2
-                  for i, (_, f, _) in enumerate(members) for _, g, _ in members[i + 1:])
-    bar = worse_z(LOOKS * (len(members) - 1) * n_stats)
+    bar = worse_z(LOOKS * (len(members) - 1))
     out, dropped = [], []
     for row, f, family in members:
         best = None                                    # (z, fit) of its strongest rival
@@ -78,8 +82,7 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
             if g is f or (f is chosen and g_family != family):
                 continue
             prob = problem(f, g)
-            stats = ("paired",) if prob.z_stat == "paired" else ("paired", prob.z_stat)
-            z = max(float(cluster_z(ssr(prob, f), ssr(prob, g), st)) for st in stats)
+            z = beaten_z(ssr(prob, f), ssr(prob, g), prob.z_stat)
             if best is None or z > best[0]:
                 best = (z, g, prob)
         if best is None:
@@ -112,6 +115,14 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
     if len(judged["ambiguous"]) < 2:
         judged.update(verdict="named", ambiguous=[], separating_excitation=[])
     return None if lead is chosen else lead
+
+
+def beaten_z(f_c: np.ndarray, g_c: np.ndarray, z_stat: str = "paired") -> float:
+    """How clearly g beats f, from their per-cluster SSR: the paired z, or where the
+    problem counts clusters by another statistic (z_stat), the smaller of the two, so that
+    f is beaten only when both statistics say so."""
+    stats = ("paired",) if z_stat == "paired" else ("paired", z_stat)
+    return min(float(cluster_z(f_c, g_c, st)) for st in stats)
 
 
 def _members(amb, chosen, fits, fits_free) -> list:
