@@ -39,7 +39,7 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows,
+from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows, fit_row,
                                                   free_ball_verdict, not_excluded, require_support,
                                                   top_pushes_only, widen_for_phases,
                                                   window_phases, worse_z)
@@ -49,6 +49,7 @@ from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size
                                                          confirm_on_left_out,
                                                          left_out_scores, size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
+from adaptive_c3.tools.diagnosis.engine.user_model_check import per_episode_ssr, worse_than_user
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
@@ -170,23 +171,27 @@ def fold_ids(rec, W) -> tuple[np.ndarray, str]:
     return fold, f"{FOLDS}-fold cross-validation over {block}-step time blocks"
 
 
-def error_table(spec, models, W, fold, floor, mask=None) -> dict | None:
-    """Out-of-fold errors: RMSE per state and RMS in noise-floor units. models: fold -> P."""
+def error_table(spec, models, W, fold, floor, mask=None, per_episode=None) -> dict | None:
+    """Out-of-fold errors: RMSE per state and RMS in noise-floor units. models: fold -> P.
+    per_episode (a dict): filled with {episode: SSR in noise units}."""
     from adaptive_c3.tools.diagnosis.backends.effects import rollout
     from adaptive_c3.tools.diagnosis.engine.locate import LAG
     keep = (fold >= 0) if mask is None else (fold >= 0) & mask
-    errs = []
+    errs, eps = [], []
     for k, P in models.items():
         Wk = W.take(keep & (fold == k))
         if len(Wk):
             X, _ = rollout(P, Wk.X0, Wk.U, Wk.Xt.shape[1], LAG, Wk.row)
             errs.append(X - Wk.Xt)
+            eps.append(Wk.episode)
     if not errs:
         return None
     err = np.concatenate(errs, 0)
     fl = floor[:err.shape[1]]
     rmse = np.sqrt(np.mean(err ** 2, axis=(0, 1)))
     scored = fit_weight(spec) > 0
+    if per_episode is not None:
+        per_episode.update(per_episode_ssr(err, np.concatenate(eps), fl, scored))
     norm = float(np.sqrt(np.mean((err / fl)[..., scored] ** 2)))
     return dict(rmse={n: float(v) for n, v in zip(spec.state_names, rmse)},
                 normalised_rms=norm, excess_over_noise=float(np.sqrt(max(norm ** 2 - 1.0, 0.0))),
@@ -323,14 +328,17 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     E1, e1 = W1.take(np.arange(len(W1)) % es == 0), fold1[::es]
     EH, eH = WH.take(np.arange(len(WH)) % es == 0), foldH[::es]
     inside1, insideH = in_windows(E1, windows, rec), in_windows(EH, windows, rec)
-    errors = {}
+    errors, per_episode = {}, {"before": {}, "after": {}}
     for tag, models in (("before", before), ("after", after)):
         errors[tag] = dict(
             one_step=error_table(spec, models, E1, e1, floor_report),
-            rollout=error_table(spec, models, EH, eH, floor_report),
+            rollout=error_table(spec, models, EH, eH, floor_report, per_episode=per_episode[tag]),
             inside_mismatch_windows=dict(
                 one_step=error_table(spec, models, E1, e1, floor_report, inside1),
                 rollout=error_table(spec, models, EH, eH, floor_report, insideH)))
+    if chosen is not None:          # the answer's own rollouts against the user's model
+        worse_than_user(judged, chosen, per_episode["before"], per_episode["after"],
+                        fit_row(None, none_eval), fit_row(chosen, none_eval))
     bar.close()
     return dict(spec=spec, base=base, sigma=sigma, floor=floor, sigma_report=sigma_report,
                 floor_report=floor_report, windows=windows, steps=steps,

@@ -128,7 +128,7 @@ def _judged(result) -> dict:
                                      ambiguous=[], separating_excitation=[])
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
                               "size_tests", "confirmation", "left_out", "below_size",
-                              "beyond_size", "left_out_rivals")
+                              "beyond_size", "left_out_rivals", "against_user_model")
             if k in j}
 
 
@@ -184,6 +184,12 @@ def ambiguity_summary(report) -> str:
                 "fit never used, so not kept: "
                 + ", ".join(f"{r['name']} (against {r['beaten_by']}: cluster z "
                             f"{r['z']:.2f} on {r['windows']} windows)" for r in gone) + ".")
+    u = report.get("against_user_model")
+    if u and u["joined"]:
+        out += (f" Its own held-out rollouts are clearly worse than the model as given "
+                f"(SSR {_fmt(u['after'])} against {_fmt(u['before'])} in noise units over "
+                f"{u['episodes']} episodes, paired z {u['z']:.2f}), so `none` is kept "
+                f"beside it.")
     if report.get("verdict") != "ambiguous":
         return out
     names = ", ".join(f"{a['name']}{'[' + a['target'] + ']' if a['target'] else ''} "
