@@ -313,8 +313,6 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         chosen = lead
         widen(scored, none_scored, chosen, judged, user_base, nuisance)
     left_out_scores(judged, fits, left_out, left_none)
-    if not getattr(spec, "side_contact", False):
-        top_pushes_only(judged)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance
     after = {k: patch(spec, base + (chosen.fold_effects(spec, k) if chosen else []))
@@ -339,6 +337,8 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if chosen is not None:          # the answer's own rollouts against the user's model
         worse_than_user(judged, chosen, per_episode["before"], per_episode["after"],
                         fit_row(None, none_eval), fit_row(chosen, none_eval))
+    if not getattr(spec, "side_contact", False):     # every proposal made: strikes -> pushes
+        top_pushes_only(judged)
     bar.close()
     return dict(spec=spec, base=base, sigma=sigma, floor=floor, sigma_report=sigma_report,
                 floor_report=floor_report, windows=windows, steps=steps,
