@@ -8,7 +8,7 @@ import numpy as np
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
-from adaptive_c3.tools.diagnosis.engine.evidence import verdict
+from adaptive_c3.tools.diagnosis.engine.evidence import fit_row, verdict
 from adaptive_c3.tools.diagnosis.engine.fit import (Fit, Problem, evaluate, paired_z,
                                                   signed_rank_z)
 from adaptive_c3.tools.diagnosis.engine.left_out_rivals import beaten_z, rivals_on_left_out
@@ -143,4 +143,98 @@ def test_a_clear_loss_by_both_statistics_still_drops_the_rival():
     rivals_on_left_out(judged, fric, [fric, mass], [], left_out)
     r = {x["name"]: x for x in judged["left_out_rivals"]}
     assert r["mass_scale[ball]"]["dropped"] and r["mass_scale[ball]"]["z"] >= 2.0
+    assert judged["verdict"] == "named"
+
+
+DRAG = Candidate("viscous_damping", "ball")
+EE_OFFSET = Candidate("contact_offset", "ee_ball")
+
+
+class CoastOrPushProblem(Problem):
+    """Windows that alternate between coasts (even index) and pushes (odd). A drag acts
+    on the coasts only: the residual there is the gap between the model's and the data's
+    drag. An EE-ball offset acts on the pushes only, where the data also carry a
+    mismatch of `push_gap` that an offset of that size absorbs (as a second engine's
+    compliance and radii do on Drake's plant)."""
+
+    def __init__(self, spec, drag: float, push_gap: float, windows: int = 1200):
+        n = windows
+        W = Windows(np.zeros((n, 19)), np.zeros((n, 2, 19)), np.zeros((n, 3, 3)),
+                    np.arange(n) * 10, np.arange(n) // 12, np.arange(n) * 0.1)
+        super().__init__(spec, [], W, np.arange(n) % 3, np.ones((2, 19)), cluster_steps=50)
+        self.noise = np.random.default_rng(7).normal(0.0, 1.0, (n, 2, 19))
+        self.drag, self.push_gap = drag, push_gap
+
+    def residuals(self, effects, W):
+        value = {c.name: float(v[0]) for c, v in effects}
+        idx = W.row // 10
+        coast = idx % 2 == 0
+        gap = np.where(coast, value.get("viscous_damping", 0.0) - self.drag,
+                       value.get("contact_offset", 0.0) - self.push_gap)
+        return self.noise[idx] + gap[:, None, None]
+
+    def coasts(self):
+        """The problem on its coast windows only (the free windows of this problem)."""
+        sub = copy.copy(self)
+        sub.fold = np.where((self.windows.row // 10) % 2 == 0, self.fold, -1)
+        return sub
+
+
+def _coast_or_push(drag, push_gap, monkeypatch, drag_fit=1.0, offset_first=True):
+    """(judged {EE-ball offset, drag}, offset fit, drag fit, problem): the drag fitted as
+    a free-ball effect at drag_fit, the offset at 3, the first of the set chosen;
+    evidence.free_ball_problem gives the coast windows."""
+    from adaptive_c3.tools.diagnosis.engine import evidence
+    prob = CoastOrPushProblem(
+        ball_spec(load_scenario(str(SCENARIO_DIR / "ball_rolling.yaml"))[0]), drag, push_gap)
+    monkeypatch.setattr(evidence, "free_ball_problem", lambda p: p.coasts())
+    none_eval = evaluate(prob, None)
+    fits = [_fit(prob, EE_OFFSET, 3.0, none_eval), _fit(prob, DRAG, drag_fit, none_eval)]
+    judged = dict(verdict="ambiguous", separating_excitation=[],
+                  ambiguous=[fit_row(f, none_eval) for f in fits[::1 if offset_first else -1]])
+    return judged, fits[0], fits[1], prob
+
+
+def test_a_free_ball_effect_is_not_dropped_by_another_kind_it_beats_on_the_coasts(monkeypatch):
+    """The thirty-second set's 101138 (a drag of 0.23 N s/m): the drag's fit met an
+    EE-ball offset that absorbed a larger mismatch of the pushes, so on all left-out
+    windows the offset was clearly better and the drag, the truth, left the set. Here the
+    data carry a drag of 1 and a push mismatch of 3: the offset wins on all windows, the
+    drag on the coasts, so the drag stays (beaten only when beaten on both)."""
+    judged, offset, drag, prob = _coast_or_push(1.0, 3.0, monkeypatch)
+    all_z = beaten_z(evaluate(prob, drag)[2], evaluate(prob, offset)[2])
+    assert all_z >= 2.0                  # by all windows alone the drag would leave
+    assert rivals_on_left_out(judged, offset, [offset], [drag], prob, prob) is None
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    assert not r["viscous_damping[ball]"]["dropped"]
+    assert r["viscous_damping[ball]"]["z"] < 0.0         # the coasts decide: it is better
+    assert r["viscous_damping[ball]"]["windows"] == 600   # the coasts
+    assert judged["verdict"] == "ambiguous"
+    assert [a["name"] for a in judged["ambiguous"]] == ["contact_offset", "viscous_damping"]
+
+
+def test_a_free_ball_effect_beaten_on_the_coasts_too_still_leaves(monkeypatch):
+    """The data carry no drag: the drag fit (1) is worse than the offset on the coasts as
+    well as on all windows, so it leaves and the offset is named."""
+    judged, offset, drag, prob = _coast_or_push(0.0, 3.0, monkeypatch)
+    rivals_on_left_out(judged, offset, [offset], [drag], prob, prob)
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    assert r["viscous_damping[ball]"]["dropped"]
+    assert r["viscous_damping[ball]"]["z"] >= r["viscous_damping[ball]"]["bar"]
+    assert judged["verdict"] == "named"
+
+
+def test_another_kind_against_a_free_ball_effect_is_judged_on_all_windows(monkeypatch):
+    """A drag of 0.005 (chosen, fitted at 0.005) barely shows on the coasts, where an
+    EE-ball offset does nothing; the offset fit (3) is far off on the clean
+    pushes. The offset is judged where it was fitted, on all windows, and leaves, though
+    on the coasts alone the drag does not beat it beyond the bar."""
+    judged, offset, drag, prob = _coast_or_push(0.005, 0.0, monkeypatch, drag_fit=0.005,
+                                                offset_first=False)
+    coasts = prob.coasts()
+    assert beaten_z(evaluate(coasts, offset)[2], evaluate(coasts, drag)[2]) < 2.0
+    rivals_on_left_out(judged, drag, [offset], [drag], prob, prob)
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    assert r["contact_offset[ee_ball]"]["dropped"]
+    assert r["contact_offset[ee_ball]"]["windows"] == 1200
     assert judged["verdict"] == "named"
