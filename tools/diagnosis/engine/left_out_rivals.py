@@ -94,8 +94,8 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
         for _, g, g_family in members:
             if g is f or (f is chosen and g_family != family):
                 continue
-            z, prob = min((beaten_z(ssr(p, f), ssr(p, g), p.z_stat), k, p)
-                          for k, p in enumerate(problems(f, g)))[::2]
+            z, prob = min(((beaten_z(ssr(p, f), ssr(p, g), p.z_stat), p)
+                           for p in problems(f, g)), key=lambda zp: zp[0])
             if best is None or z > best[0]:
                 best = (z, g, prob)
         if best is None:
