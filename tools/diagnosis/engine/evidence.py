@@ -52,19 +52,6 @@ def window_phases(spec, W) -> np.ndarray:
     return out
 
 
-def contact_onsets(spec, W) -> np.ndarray:
-    """[W] bool: the windows in which EE-ball contact begins at their second step (the
-    start and the first step clear by more than EE_TOUCH, the second within it): one per
-    touchdown or strike (all False for models without the cache)."""
-    cache = getattr(spec, "cache", None) or {}
-    if "phi" not in cache:
-        return np.zeros(len(W), bool)
-    gap = cache["phi"][:, 0]
-    rows = np.asarray(W.row)
-    at = lambda k: gap[np.minimum(rows + k, len(gap) - 1)]      # noqa: E731
-    return (at(0) > EE_TOUCH) & (at(1) > EE_TOUCH) & (at(2) <= EE_TOUCH)
-
-
 def evidence_windows(spec, W, phases, gain, name: str, top: int = 5) -> dict:
     """Where the held-out error fell (gain [W] = SSR before - after per window): the share
     carried by the effect's own phases and its largest contiguous runs there."""

@@ -53,7 +53,6 @@ SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is
 # set, run at half the step, the left-out confirmation named a mass on draws whose truth
 # was another effect or none (docs/diagnosis.md)
 FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
-ONSET_FIT_WINDOWS = 33    # ... of which at most this many start an EE-ball contact
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
 CACHE_MODELS = 400        # rollouts kept for this many parameter sets (a diagnosis asks
                           # for ~260, ~50 MB; an evicted set is rolled out again)
@@ -94,9 +93,6 @@ class DrakeBallSpec(BallSpec):
     forces: BallForceCoefficients = BallForceCoefficients()
     workers: int = 2
     fit_windows: int = FIT_WINDOWS
-    # of them, at most this many where EE-ball contact begins (diagnose.fit_windows: the
-    # sparse stride rarely lands on a strike, where EE-ball friction shows)
-    onset_fit_windows: int = ONSET_FIT_WINDOWS
     # the free-ball effects' fit: about this many of the free windows (diagnose.long_problem)
     free_fit_windows: int = FIT_WINDOWS
     eval_stride: int = EVAL_STRIDE
@@ -129,8 +125,7 @@ class DrakeBallSpec(BallSpec):
     def prepare(self, rec) -> None:
         super().prepare(rec)
         n = sum(max(len(idx) - 10, 0) for _, idx in rec.episodes())
-        self.window_stride = max(3, int(np.ceil(n / (self.fit_windows -
-                                                     self.onset_fit_windows))))
+        self.window_stride = max(3, int(np.ceil(n / self.fit_windows)))
 
     def custom_patch(self, effects) -> "DrakeBallPatched":
         return drake_patch(self, effects)
