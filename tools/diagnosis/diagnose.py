@@ -39,10 +39,11 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows, fit_row,
-                                                  free_ball_verdict, not_excluded, require_support,
-                                                  top_pushes_only, widen_for_phases,
-                                                  window_phases, worse_z)
+from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, strike_onsets,
+                                                  evidence_windows, fit_row,
+                                                  free_ball_verdict, not_excluded,
+                                                  require_support, top_pushes_only,
+                                                  widen_for_phases, window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
@@ -233,6 +234,26 @@ def long_problem(rec, spec, prob, P0, sigma, stride: int, left_out_stride: int =
     return out, size_test_problem(out, W, fold, keep, left_out_stride)
 
 
+def fit_windows(spec, W, stride: int) -> np.ndarray:
+    """[W] bool: the windows the fit uses: every `stride`-th, and, for a spec with
+    `strike_fit_windows`, up to that many more (evenly over the recording) in which a
+    strike begins. A costly model's sparse stride rarely lands on a strike, where EE-ball
+    friction shows: on development draw 101215 (mu 0.28 against the model's 1, with a
+    follow-up of strikes) the 100 windows at a stride of 115 held 23 in contact, and over
+    them the fit's error did not change between mu 0.1 and 1.0; over the 100 windows
+    where contact began it was least at 0.28 (SSR 1.47e5 against 3.05e5 at mu 1), and
+    over the first recording's 35 touchdowns (pushes from above) it barely moved."""
+    keep = np.arange(len(W)) % max(int(stride), 1) == 0
+    budget = int(getattr(spec, "strike_fit_windows", 0))
+    if budget > 0:
+        onsets = np.flatnonzero(strike_onsets(spec, W))
+        if len(onsets) > budget:
+            onsets = onsets[np.unique(np.linspace(0, len(onsets) - 1, budget).round()
+                                      .astype(int))]
+        keep[onsets] = True
+    return keep
+
+
 def in_windows(W, windows, rec) -> np.ndarray:
     ep_ids = rec.episode[W.row] if rec.episode is not None else np.zeros(len(W), int)
     m = np.zeros(len(W), bool)
@@ -268,7 +289,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     foldH, split_note = fold_ids(rec, WH)
     fold1, _ = fold_ids(rec, W1)
     stride = int(getattr(spec, "window_stride", 1))    # costly models: fewer fit windows
-    keep = np.arange(len(WH)) % stride == 0
+    keep = fit_windows(spec, WH, stride)
     prob = Problem(spec, base, WH.take(keep), foldH[keep], fit_weight(spec) / floor)
     if len(prob.folds) < 2:
         raise RecordingError("recording is too short to hold out data for the fit")

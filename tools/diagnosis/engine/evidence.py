@@ -31,6 +31,7 @@ EE_CLEAR = 0.004          # m: EE-ball gap of a free window
 EE_TOUCH = 0.001          # m: EE-ball gap of a push window
 ON_TABLE = 0.003          # m: ball-table gap of a rolling ball
 MOVING = 0.02             # m/s
+SIDE_CONTACT = np.radians(30.0)   # EE-ball direction within this of horizontal: a strike
 
 
 def window_phases(spec, W) -> np.ndarray:
@@ -50,6 +51,27 @@ def window_phases(spec, W) -> np.ndarray:
     out[clear & on_table & (speed < MOVING)] = "rest"
     out[gap_ee.min(1) < EE_TOUCH] = "push"
     return out
+
+
+def strike_onsets(spec, W) -> np.ndarray:
+    """[W] bool: the windows in which a strike begins: EE-ball contact starts at their
+    second step (the start and the first step clear by more than EE_TOUCH, the second
+    within it) with the EE beside the ball (the EE-ball direction at the start within
+    SIDE_CONTACT of horizontal; a push's touchdown comes from above). All False for
+    models without the cache."""
+    cache = getattr(spec, "cache", None) or {}
+    if "phi" not in cache:
+        return np.zeros(len(W), bool)
+    gap = cache["phi"][:, 0]
+    rows = np.asarray(W.row)
+
+    def at(k):
+        return gap[np.minimum(rows + k, len(gap) - 1)]
+
+    d = W.X0[:, 0:3] - W.X0[:, 7:10]
+    up = np.abs(d[:, 2]) / np.maximum(np.linalg.norm(d, axis=1), 1e-9)
+    return (at(0) > EE_TOUCH) & (at(1) > EE_TOUCH) & (at(2) <= EE_TOUCH) & \
+        (up < np.sin(SIDE_CONTACT))
 
 
 def evidence_windows(spec, W, phases, gain, name: str, top: int = 5) -> dict:

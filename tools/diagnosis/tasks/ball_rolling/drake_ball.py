@@ -53,6 +53,7 @@ SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is
 # set, run at half the step, the left-out confirmation named a mass on draws whose truth
 # was another effect or none (docs/diagnosis.md)
 FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
+STRIKE_FIT_WINDOWS = 33   # and at most this many more where a strike begins
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
 CACHE_MODELS = 400        # rollouts kept for this many parameter sets (a diagnosis asks
                           # for ~260, ~50 MB; an evicted set is rolled out again)
@@ -93,6 +94,9 @@ class DrakeBallSpec(BallSpec):
     forces: BallForceCoefficients = BallForceCoefficients()
     workers: int = 2
     fit_windows: int = FIT_WINDOWS
+    # and at most this many where a strike begins (diagnose.fit_windows: the sparse
+    # stride rarely lands on a strike, where EE-ball friction shows)
+    strike_fit_windows: int = STRIKE_FIT_WINDOWS
     # the free-ball effects' fit: about this many of the free windows (diagnose.long_problem)
     free_fit_windows: int = FIT_WINDOWS
     eval_stride: int = EVAL_STRIDE
