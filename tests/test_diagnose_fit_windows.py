@@ -63,9 +63,9 @@ def test_fit_windows_are_the_stride_alone_without_strikes_a_budget_or_the_cache(
     stride_only = W_rows % 7 == 0
     phi, side = _recording([60, 120], [])
     pushes_only = SimpleNamespace(cache={"phi": phi}, strike_fit_windows=10)
-    no_budget = SimpleNamespace(cache={"phi": _recording([60], [120])[0]})
+    phi_s, side_s = _recording([60], [120])
+    no_budget = SimpleNamespace(cache={"phi": phi_s})
     no_cache = SimpleNamespace(strike_fit_windows=10)
     assert np.array_equal(fit_windows(pushes_only, _windows(W_rows, side), 7), stride_only)
-    assert np.array_equal(fit_windows(no_budget, _windows(W_rows, _recording([60], [120])[1]),
-                                      7), stride_only)
+    assert np.array_equal(fit_windows(no_budget, _windows(W_rows, side_s), 7), stride_only)
     assert np.array_equal(fit_windows(no_cache, _windows(W_rows, side), 7), stride_only)

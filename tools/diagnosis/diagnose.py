@@ -39,11 +39,11 @@ import yaml
 from adaptive_c3.scenarios.schema import ScenarioError, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, applicable_candidates,
                                                 cartpole_spec, patch)
-from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, strike_onsets,
-                                                  evidence_windows, fit_row,
+from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows, fit_row,
                                                   free_ball_verdict, not_excluded,
-                                                  require_support, top_pushes_only,
-                                                  widen_for_phases, window_phases, worse_z)
+                                                  require_support, strike_onsets,
+                                                  top_pushes_only, widen_for_phases,
+                                                  window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
