@@ -8,7 +8,7 @@ import numpy as np
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.boundary import size_test_problem
-from adaptive_c3.tools.diagnosis.engine.evidence import fit_row, verdict
+from adaptive_c3.tools.diagnosis.engine.evidence import fit_row, supported, verdict
 from adaptive_c3.tools.diagnosis.engine.fit import (Fit, Problem, evaluate, paired_z,
                                                   signed_rank_z)
 from adaptive_c3.tools.diagnosis.engine.left_out_rivals import beaten_z, rivals_on_left_out
@@ -107,6 +107,30 @@ def test_a_chosen_effect_the_left_out_windows_show_clearly_worse_gives_way():
     assert r["friction_coefficient[ee_ball]"]["dropped"]
     assert not r["mass_scale[ball]"]["dropped"]
     assert judged["verdict"] == "named" and judged["ambiguous"] == []
+
+
+def test_a_rival_whose_interval_holds_the_model_value_does_not_take_the_lead():
+    """As above (the mass beats mu on the left-out windows), but the mass fit's interval
+    holds the model's 1 (evidence.supported): it is as consistent with the data as the
+    model without it, so mu stays and leads, the mass beside it: the verdict stays
+    ambiguous, nothing is returned to lead."""
+    judged, fric, mass, left_out = _judged({"mass": 1.5})
+    spec = left_out.spec
+    assert supported(spec, mass)
+    mass.ci = np.array([[0.9, 2.1]])
+    assert not supported(spec, mass)
+    asked = []
+
+    def may_lead(f):
+        asked.append(f)
+        return supported(spec, f)
+    assert rivals_on_left_out(judged, fric, [fric, mass], [], left_out, None, may_lead) is None
+    assert asked == [mass]
+    r = {x["name"]: x for x in judged["left_out_rivals"]}
+    assert r["friction_coefficient[ee_ball]"]["z"] >= r["friction_coefficient[ee_ball]"]["bar"]
+    assert not r["friction_coefficient[ee_ball]"]["dropped"]
+    assert judged["verdict"] == "ambiguous"
+    assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "mass_scale"]
 
 
 def test_two_effects_the_left_out_windows_cannot_tell_apart_both_stay():

@@ -41,7 +41,7 @@ from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, ap
                                                 cartpole_spec, patch)
 from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows, fit_row,
                                                   free_ball_verdict, not_excluded,
-                                                  require_support, strike_onsets,
+                                                  require_support, strike_onsets, supported,
                                                   top_pushes_only, widen_for_phases,
                                                   window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
@@ -329,10 +329,17 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if shown is not None and shown is not chosen:     # named: beyond its size there
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)
-    lead = rivals_on_left_out(judged, chosen, fits, fits_free, left_out, free_left_out)
+    def may_lead(f) -> bool:         # widened as the chosen one was, then supported
+        evidence = judged.get("evidence")
+        widen(scored, none_scored, f, judged, user_base, nuisance)
+        if supported(spec, f, shift):
+            return True
+        judged["evidence"] = evidence
+        return False
+    lead = rivals_on_left_out(judged, chosen, fits, fits_free, left_out, free_left_out,
+                              may_lead)
     if lead is not None:             # the chosen effect fell to one fitted as it was
         chosen = lead
-        widen(scored, none_scored, chosen, judged, user_base, nuisance)
     left_out_scores(judged, fits, left_out, left_none)
     P1 = patch(spec, base + (chosen.effects(spec) if chosen else []))
     before = {k: P_user for k in prob.folds}    # before: the user's model, no nuisance

@@ -437,6 +437,11 @@ def supported_components(spec, fit, shift=None) -> list[tuple]:
     return out
 
 
+def supported(spec, fit, shift=None) -> bool:
+    """Every effect of the fit supported (supported_components)."""
+    return all(k for _, k in supported_components(spec, fit, shift))
+
+
 def require_support(judged, spec, chosen, fits, none_eval, shift=None) -> None:
     """A chosen effect is named only while its own (widened) 95 % interval excludes the
     model's value: one whose interval holds it is as consistent with the data as the

@@ -35,8 +35,13 @@ the ranks, on the free windows), an effect leaves only when both put it beyond t
 3.2 mm, beaten by a drag at paired z 2.49 but rank z 1.92, bar 2.24: the two fits' error
 on the left-out free windows differed by 0.5 % of what either explained) and left a
 confident wrong drag. The chosen effect leaves only
-for one fitted on the same windows (both free-ball fits or both not), which then leads
-the answer. `none` is no member here (boundary.confirm_on_left_out and beyond_size judge
+for one fitted on the same windows (both free-ball fits or both not) that may lead the
+answer (the caller's `may_lead`: its interval, widened as the chosen one's was, clear of
+the model's value, evidence.supported); it then leads. A rival whose interval holds the
+model's value is as consistent with the data as the model without it, so the chosen
+effect it beat stays, the rival beside it: on the thirty-fifth set's 101422 (a drag of
+0.12 N s/m, one recording) a rolling resistance beat the chosen drag at z 2.14 (bar 2.0)
+and led a confident answer of 0.13 mm with an interval of -0.2..0.48 mm. `none` is no member here (boundary.confirm_on_left_out and beyond_size judge
 it). Recorded as judged["left_out_rivals"]: each member the test dropped or kept, with
 the z (beaten_z) of the member that beat it most (positive: that one is better).
 """
@@ -49,12 +54,14 @@ from adaptive_c3.tools.diagnosis.engine.fit import cluster_z, evaluate
 LOOKS = 2      # the rival rule on the fit's clusters, then this test on the left-out ones
 
 
-def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out=None):
+def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out=None,
+                       may_lead=None):
     """Drop from judged's ambiguous set each effect another member clearly beats on the
     left-out windows of size_prob (two free-ball effects: on the free windows of
     free_left_out, the free-ball fit's longer rollouts, where given); the verdict is
-    `named` when one is left. Returns the fit that now leads the answer when it is not
-    `chosen` (the caller widens its interval), else None."""
+    `named` when one is left. may_lead(fit) -> bool: whether a fit may take the chosen
+    one's place (by default any; the caller widens its interval before it says). Returns
+    the fit that now leads the answer when it is not `chosen`, else None."""
     from adaptive_c3.tools.diagnosis.engine.evidence import (FREE_EFFECTS, free_ball_problem,
                                                              worse_z)
     amb = judged.get("ambiguous") or []
@@ -113,9 +120,10 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
     if any(lead_row is d for d in dropped):    # the chosen one fell: the best kept of its kind
         family = next(k for _, f, k in members if f is chosen)
         same = [(a, f) for a, f, k in members if k == family and any(a is b for b in kept)]
+        same = next(((a, f) for a, f in same if may_lead is None or may_lead(f)), None)
         if same:
-            lead_row, lead = same[0]
-        else:                           # what beat it fell too: it stays
+            lead_row, lead = same
+        else:                    # what beat it fell too, or may not lead: it stays
             dropped = [d for d in dropped if d is not lead_row]
             kept = [a for a in amb if not any(a is d for d in dropped)]
             next(r for r in out if r["name"] == chosen.label())["dropped"] = False
