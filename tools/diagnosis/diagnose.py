@@ -48,7 +48,8 @@ from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
                                                          confirm_on_left_out,
-                                                         left_out_scores, size_test_problem)
+                                                         left_out_scores, ruled_out_members,
+                                                         size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
 from adaptive_c3.tools.diagnosis.engine.user_model_check import per_episode_ssr, worse_than_user
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
@@ -325,6 +326,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG, prob, nuisance)
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
                  size_prob=left_out, size_none=left_none, part_of_row=rec.extras.get("part"))
+    gone = ruled_out_members(judged)     # every size that matters ruled out: too small
+    if chosen is not None and chosen.label() in gone:
+        chosen = None
+        judged["ambiguous"].sort(key=lambda a: a["name"] != "none")    # `none` leads
     shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift)
     if shown is not None and shown is not chosen:     # named: beyond its size there
         chosen = shown

@@ -30,6 +30,8 @@ diagnosed and scored:
   below_size     the effect(s) of an answer (named, or an ambiguous set) whose every
                  interval lay within its size that matters, answered `none` instead
                  (engine/boundary.py below_size)
+  ruled_out_members  the members of a set beside `none` whose every size that matters
+                 was ruled out, taken out of it (engine/boundary.py ruled_out_members)
   left_out       each single member beside `none`: its own fit against `none` there
                  (a record; no answer depends on it)
   beyond_size    each member beside `none` whose value lies beyond its size: its fit
@@ -142,6 +144,13 @@ def _summary(rows) -> dict:
             for t in r.get("size_tests") or [])),
         # answers within their sizes that matter turned into `none` (boundary.below_size)
         within_size_to_none=count(lambda r: r.get("below_size")),
+        # members of a set beside `none` whose sizes were all ruled out, taken out
+        # (boundary.ruled_out_members), and taken out while they were the truth
+        ruled_out_members=dict(
+            answers=count(lambda r: r.get("ruled_out_members")),
+            the_truth=count(lambda r: r.get("matters", True) and _label(
+                r["truth"]["name"], r["truth"]["target"]) in (r.get("ruled_out_members")
+                                                             or []))),
         targets=TARGETS)
 
 

@@ -420,6 +420,7 @@ def judged_fields(result, truth) -> dict:
                           for f in result.get("nuisance", [])],
                 size_excluded=[x["name"] for x in j.get("size_tests", []) if x["excluded"]],
                 below_size=[x["name"] for x in j.get("below_size", [])],
+                ruled_out_members=list(j.get("ruled_out_members", [])),
                 size_tests=list(j.get("size_tests", [])),
                 confirmation=j.get("confirmation"), left_out=j.get("left_out"),
                 beyond_size=j.get("beyond_size"), left_out_rivals=j.get("left_out_rivals"),
