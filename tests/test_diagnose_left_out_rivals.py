@@ -129,8 +129,11 @@ def test_a_rival_whose_interval_holds_the_model_value_does_not_take_the_lead():
     r = {x["name"]: x for x in judged["left_out_rivals"]}
     assert r["friction_coefficient[ee_ball]"]["z"] >= r["friction_coefficient[ee_ball]"]["bar"]
     assert not r["friction_coefficient[ee_ball]"]["dropped"]
+    assert "holding the model's value" in r["friction_coefficient[ee_ball]"]["kept"]
     assert judged["verdict"] == "ambiguous"
     assert [a["name"] for a in judged["ambiguous"]] == ["friction_coefficient", "mass_scale"]
+    assert "Beaten there but kept: friction_coefficient[ee_ball] (by mass_scale[ball]" \
+        in ambiguity_summary(judged)
 
 
 def test_two_effects_the_left_out_windows_cannot_tell_apart_both_stay():

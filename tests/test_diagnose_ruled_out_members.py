@@ -3,6 +3,7 @@
 verdict is `none` when nothing else is left (engine/boundary.py ruled_out_members)."""
 from adaptive_c3.tools.diagnosis.engine.boundary import ruled_out_members
 from adaptive_c3.tools.diagnosis.engine.proposals import proposal
+from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
 
 
 def _row(name, target=""):
@@ -30,6 +31,7 @@ def test_a_member_whose_sizes_were_all_ruled_out_leaves_and_none_is_the_answer()
     assert ruled_out_members(j) == ["mass_scale[ball]"]
     assert j["verdict"] == "none" and j["ambiguous"] == [] and j["separating_excitation"] == []
     assert "evidence" not in j and j["ruled_out_members"] == ["mass_scale[ball]"]
+    assert "so not kept beside `none`: mass_scale[ball]." in ambiguity_summary(j)
 
 
 def test_the_others_stay_beside_none():

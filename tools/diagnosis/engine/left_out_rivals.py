@@ -120,13 +120,16 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
     if any(lead_row is d for d in dropped):    # the chosen one fell: the best kept of its kind
         family = next(k for _, f, k in members if f is chosen)
         same = [(a, f) for a, f, k in members if k == family and any(a is b for b in kept)]
-        same = next(((a, f) for a, f in same if may_lead is None or may_lead(f)), None)
-        if same:
-            lead_row, lead = same
+        pick = next(((a, f) for a, f in same if may_lead is None or may_lead(f)), None)
+        if pick:
+            lead_row, lead = pick
         else:                    # what beat it fell too, or may not lead: it stays
             dropped = [d for d in dropped if d is not lead_row]
             kept = [a for a in amb if not any(a is d for d in dropped)]
-            next(r for r in out if r["name"] == chosen.label())["dropped"] = False
+            next(r for r in out if r["name"] == chosen.label()).update(
+                dropped=False, kept="the effects fitted as it was that stay have 95 % "
+                "intervals holding the model's value" if same else
+                "no effect fitted as it was stays")
     judged["ambiguous"] = [lead_row] + [a for a in kept if a is not lead_row]
     if not dropped:
         return None
