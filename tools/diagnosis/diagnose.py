@@ -353,8 +353,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
              for k in prob.folds}
     # the reported errors in units of the calibrated noise where the backend supports it
     # (the fit keeps the one-step estimate its rules were set with): a perfect model's
-    # excess over noise is then ~0
-    sigma_report = calibrate_noise(spec, rec, P0, sigma) \
+    # excess over noise is then ~0. The gain is the one of the model sigma was estimated
+    # with (the user's); the floor then propagates it through the base model (a sensor
+    # delay's start carries more of it: prediction_floor)
+    sigma_report = calibrate_noise(spec, rec, P_user, sigma) \
         if getattr(spec, "calibrated_noise", False) else sigma
     floor_report = prediction_floor(P0, sigma_report, horizon)
     E1, e1 = W1.take(np.arange(len(W1)) % es == 0), fold1[::es]

@@ -165,6 +165,13 @@ EFFECTS = {e.name: e for e in [
               lambda s, t: (0.0, (MAX_DELAY_STEPS - 1) * s.dt),
               lambda s, t: np.arange(0, MAX_DELAY_STEPS - 1, 0.5) * s.dt,
               description="the input acts later than it is recorded"),
+    EffectDef("sensor_delay", "system", ("delay",), lambda s, t: "s", _zero,
+              lambda s, t: (0.0, (MAX_DELAY_STEPS - 1) * s.dt),
+              lambda s, t: np.arange(0, MAX_DELAY_STEPS - 1, 0.5) * s.dt,
+              nuisance_only=True,
+              description="the recorded states lag the true ones (a camera's latency, an "
+                          "estimate resampled between its samples): each recorded sample "
+                          "blends the two true samples about the delay"),
     EffectDef("external_force", "coord", ("force",), _coord_unit(True, False), _zero,
               _ef_bounds, _ef_grid, description="a constant force (a tilt, a spring, a cable)"),
     EffectDef("calibration_offset", "pair", ("offset",), lambda s, t: "m", _zero,

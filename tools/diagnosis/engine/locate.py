@@ -125,12 +125,17 @@ def calibrate_noise(spec, rec, P: Patched, sigma: np.ndarray, seed: int = 0) -> 
 
 
 def prediction_floor(P: Patched, sigma: np.ndarray, horizon: int) -> np.ndarray:
-    """[H, n] std of the h-step prediction error caused by sensor noise alone."""
-    S = np.diag(sigma ** 2)
-    out, Ah = [], np.eye(len(sigma))
+    """[H, n] std of the h-step prediction error caused by sensor noise alone. A model with
+    a sensor delay of fraction a of a step (P.sensor_fraction, the drake ball backend)
+    starts from (1 + a) x_k - a x_(k-1), which carries (1 + a)^2 + a^2 times the noise,
+    and blends its samples h and h - 1 by (1 - a, a)."""
+    a = float(getattr(P, "sensor_fraction", 0.0))
+    S = np.diag(sigma ** 2) * ((1 + a) ** 2 + a ** 2)
+    out, before, Ah = [], np.eye(len(sigma)), np.eye(len(sigma))
     for _ in range(horizon):
-        Ah = P.A @ Ah
-        out.append(np.sqrt(sigma ** 2 + np.diag(Ah @ S @ Ah.T)))
+        before, Ah = Ah, P.A @ Ah
+        M = (1 - a) * Ah + a * before
+        out.append(np.sqrt(sigma ** 2 + np.diag(M @ S @ M.T)))
     return np.array(out)
 
 

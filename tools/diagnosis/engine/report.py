@@ -67,6 +67,9 @@ NUISANCE_NOTES = {
     "": "fitted first and kept in the model for every candidate",
     "actuator_delay": "fitted first and kept in the model for every candidate (the "
                       "recorded states lag the recorded inputs)",
+    "sensor_delay": "fitted first and kept in the model for every candidate (the "
+                    "recorded states lag the true ones; the model's predictions are "
+                    "delayed the same way)",
     "calibration_offset": f"fitted first (within +-{1e3 * CALIBRATION_TOLERANCE:g} mm: how "
                           "well a table height or tool radius is known) and kept in the "
                           "model for every candidate; a selected contact_offset of the same "
