@@ -98,6 +98,14 @@ def _scaled(lo_lin, hi_lin, lo_rot, hi_rot, n=21, symmetric=False):
 
 
 _vd_grid, _vd_bounds = _scaled(0.0, 10.0, 0.0, 0.5)
+
+
+def _delay_bounds(spec, target):          # s: up to the input history the windows keep
+    return (0.0, (MAX_DELAY_STEPS - 1) * spec.dt)
+
+
+def _delay_grid(spec, target):
+    return np.arange(0, MAX_DELAY_STEPS - 1, 0.5) * spec.dt
 _cf_grid, _cf_bounds = _scaled(0.0, 5.0, 0.0, 0.3)
 _ef_grid, _ef_bounds = _scaled(0.0, 5.0, 0.0, 0.5, symmetric=True)
 _zero = lambda spec, target: 0.0          # noqa: E731
@@ -162,13 +170,10 @@ EFFECTS = {e.name: e for e in [
               lambda s, t: (0.1, 5.0), lambda s, t: np.geomspace(0.4, 2.5, 25),
               description="the actuators deliver a different force than commanded"),
     EffectDef("actuator_delay", "system", ("delay",), lambda s, t: "s", _zero,
-              lambda s, t: (0.0, (MAX_DELAY_STEPS - 1) * s.dt),
-              lambda s, t: np.arange(0, MAX_DELAY_STEPS - 1, 0.5) * s.dt,
+              _delay_bounds, _delay_grid,
               description="the input acts later than it is recorded"),
     EffectDef("sensor_delay", "system", ("delay",), lambda s, t: "s", _zero,
-              lambda s, t: (0.0, (MAX_DELAY_STEPS - 1) * s.dt),
-              lambda s, t: np.arange(0, MAX_DELAY_STEPS - 1, 0.5) * s.dt,
-              nuisance_only=True,
+              _delay_bounds, _delay_grid, nuisance_only=True,
               description="the recorded states lag the true ones (a camera's latency, an "
                           "estimate resampled between its samples): each recorded sample "
                           "blends the two true samples about the delay"),
