@@ -136,12 +136,11 @@ class DrakeBallSpec(BallSpec):
         super().prepare(rec)
         # each row's previous row in its episode (itself at an episode's start): the
         # sensor delay's start extrapolation (DrakeBallPatched._starts)
-        ep = np.asarray(rec.episode) if getattr(rec, "episode", None) is not None \
-            else np.zeros(len(rec.t), int)
-        rows = np.arange(len(rec.t))
-        first = np.r_[True, ep[1:] != ep[:-1]]
-        self.cache.update(x=np.array(rec.x, float), prev_row=np.where(first, rows, rows - 1))
-        n = sum(max(len(idx) - 10, 0) for _, idx in rec.episodes())
+        prev, n = np.arange(len(rec.t)), 0
+        for _, idx in rec.episodes():
+            prev[idx[1:]] = idx[:-1]
+            n += max(len(idx) - 10, 0)
+        self.cache.update(x=np.array(rec.x, float), prev_row=prev)
         self.window_stride = max(3, int(np.ceil(n / self.fit_windows)))
 
     def custom_patch(self, effects) -> "DrakeBallPatched":
