@@ -355,7 +355,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     # (the fit keeps the one-step estimate its rules were set with): a perfect model's
     # excess over noise is then ~0. The gain is the one of the model sigma was estimated
     # with (the user's); the floor then propagates it through the base model (a sensor
-    # delay's start carries more of it: prediction_floor)
+    # delay's start blends two samples: prediction_floor)
     sigma_report = calibrate_noise(spec, rec, P_user, sigma) \
         if getattr(spec, "calibrated_noise", False) else sigma
     floor_report = prediction_floor(P0, sigma_report, horizon)

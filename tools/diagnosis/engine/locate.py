@@ -125,17 +125,25 @@ def calibrate_noise(spec, rec, P: Patched, sigma: np.ndarray, seed: int = 0) -> 
 
 
 def prediction_floor(P: Patched, sigma: np.ndarray, horizon: int) -> np.ndarray:
-    """[H, n] std of the h-step prediction error caused by sensor noise alone. A model with
-    a sensor delay of fraction a of a step (P.sensor_fraction, the drake ball backend)
-    starts from (1 + a) x_k - a x_(k-1), which carries (1 + a)^2 + a^2 times the noise,
-    and blends its samples h and h - 1 by (1 - a, a)."""
+    """[H, n] std of the h-step prediction error caused by sensor noise alone. The start
+    is a blend of the noisy samples k + j with the model's weights w_j
+    (P.start_noise_weights: {j: w_j}; the recorded sample itself, {0: 1}, by default), a
+    model with a sensor delay of fraction a of a step (P.sensor_fraction, the drake ball
+    backend) blends its predicted samples h and h - 1 by (1 - a, a), and a start that
+    reads sample k + h shares that sample's noise with the h-step target."""
     a = float(getattr(P, "sensor_fraction", 0.0))
-    S = np.diag(sigma ** 2) * ((1 + a) ** 2 + a ** 2)
-    out, before, Ah = [], np.eye(len(sigma)), np.eye(len(sigma))
-    for _ in range(horizon):
+    weights = getattr(P, "start_noise_weights", None) or {0: 1.0}
+    n = len(sigma)
+    eye = np.eye(n)
+    out, before, Ah = [], eye, eye
+    for h in range(1, horizon + 1):
         before, Ah = Ah, P.A @ Ah
         M = (1 - a) * Ah + a * before
-        out.append(np.sqrt(sigma ** 2 + np.diag(M @ S @ M.T)))
+        var = np.zeros(n)
+        for j in set(weights) | {h}:
+            C = (eye if j == h else 0.0) - weights.get(j, 0.0) * M
+            var += np.einsum("ij,j,ij->i", C, sigma ** 2, C)
+        out.append(np.sqrt(var))
     return np.array(out)
 
 
