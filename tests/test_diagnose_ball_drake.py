@@ -38,10 +38,15 @@ def _rms(spec, effects, W) -> float:
     return float(np.sqrt(np.mean(((X - W.Xt) / NOISE_STD)[..., keep] ** 2)))
 
 
+def _with_states(rec, x):
+    """The recording with its states replaced by x (e.g. the harness's noise-free ones)."""
+    return Recording(t=rec.t, x=x, u=rec.u, state_names=rec.state_names,
+                     input_names=rec.input_names, episode=rec.episode)
+
+
 def _clean_windows(scenario, rec, clean):
     """(spec prepared on the noise-free states, every 4th 10-step window of them)."""
-    crec = Recording(t=rec.t, x=clean, u=rec.u, state_names=rec.state_names,
-                     input_names=rec.input_names, episode=rec.episode)
+    crec = _with_states(rec, clean)
     spec = drake_ball_spec(scenario, workers=1)
     spec.prepare(crec)
     W = make_windows(crec, 10)
@@ -70,11 +75,10 @@ def test_lagging_states_are_followed_by_a_sensor_delay_better_than_an_input_dela
                                    params=ModelParams.from_scenario(scenario))
     spec = drake_ball_spec(scenario, workers=1)
     spec.prepare(rec)
-    every_4th = np.arange(len(make_windows(rec, 10))) % 4 == 0
-    W = make_windows(rec, 10).take(every_4th)
-    crec = Recording(t=rec.t, x=clean, u=rec.u, state_names=rec.state_names,
-                     input_names=rec.input_names, episode=rec.episode)
-    W.Xt = make_windows(crec, 10).take(every_4th).Xt          # noise-free targets
+    W = make_windows(rec, 10)
+    every_4th = np.arange(len(W)) % 4 == 0
+    W = W.take(every_4th)
+    W.Xt = make_windows(_with_states(rec, clean), 10).take(every_4th).Xt   # noise-free targets
     sensor = _rms(spec, [(Candidate("sensor_delay", ""), [0.006])], W)
     inputs = _rms(spec, [(Candidate("actuator_delay", ""), [0.006])], W)
     plain = _rms(spec, [], W)
