@@ -126,3 +126,33 @@ def test_a_size_outside_the_pooled_interval_that_one_recording_favours_stays():
     judged = dict(verdict="none", ambiguous=[], separating_excitation=[])
     not_excluded(judged, prob.spec, [fric], none_eval, prob=prob)       # pooled only
     assert judged["verdict"] == "none" and not judged.get("size_tests")
+
+
+def test_a_size_beyond_an_interval_that_lies_short_of_it_is_not_favoured():
+    """Both recordings show the data's slip at mu 0.6, just short of the size that matters
+    (0.5): mu 0.5 beats the model's 1 on each recording alone, yet the pooled fit (0.6,
+    interval 0.52..0.68) beats mu 0.5 there too, so no recording disagrees with the
+    interval and `none` stays confident with the small effect ruled out."""
+    from adaptive_c3.tools.diagnosis.engine.boundary import at_size
+    prob = SlipProblem(_spec(), truth_mu=0.6, windows=WINDOWS)
+    fric, none_eval = _fric_fit(prob, 0.6, [0.52, 0.68])
+    parts = recording_parts(prob, PART_OF_ROW)
+    assert at_size(prob, fric.cands[0], 0.5, none_eval) > size_z(3)    # beats `none`
+    judged = dict(verdict="none", ambiguous=[], separating_excitation=[])
+    not_excluded(judged, prob.spec, [fric], none_eval, prob=prob, part_of_row=PART_OF_ROW)
+    assert parts is not None and judged["verdict"] == "none" and not judged["ambiguous"]
+    assert not any(t.get("favoured") for t in judged.get("size_tests", []))
+
+
+def test_a_fit_beyond_its_size_clearly_worse_on_the_test_windows_is_tested():
+    """Clean data (mu 1) and a fit read at mu 0.3 [0.28, 0.32], beyond the size that matters
+    (0.5), that had beaten `none` on its own held-out clusters (z_vs_none > 0). Where the
+    size tests are scored it is clearly worse than `none`, so it no longer keeps its
+    effect untested: mu 0.5 is tested, clearly worse too, and the effect is excluded."""
+    prob = TwoRecordings(_spec(), 3.0, 0.0)
+    fric, none_eval = _fric_fit(prob, 0.3, [0.28, 0.32])
+    assert fric.z_vs_none < -size_z(3)
+    fric.z_vs_none = 1.0                        # as read on the fit's own sparse clusters
+    out, tested = excluded(prob, fric, [(0.5, -1)], none_eval, size_z,
+                           recording_parts(prob, PART_OF_ROW))
+    assert out is True and tested[0][0] == 0.5 and tested[0][1] < -size_z(3)
