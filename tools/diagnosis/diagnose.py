@@ -210,7 +210,7 @@ def long_problem(rec, spec, prob, P0, sigma, stride: int, left_out_stride: int =
     few of them (development draw 90106, 3.7 mm: 99 % of the fit's information in 4 of
     33 free windows; its jackknife interval reached below 0). On development draws 90132
     and 90228 (3.3 and 2.35 mm) the denser free windows named the resistance after one
-    follow-up, where the sparse ones left `none` beside it (docs/diagnosis.md).
+    follow-up, where the sparse ones left `none` beside it (tools/diagnosis/NOTES.md).
 
     left_out_stride > 0: (that problem, every left_out_stride-th window it left out, as
     boundary.size_test_problem; None where it kept all) instead."""

@@ -20,7 +20,7 @@ one test per effect at 5 %, not shared among the effects as the rival rule's bar
 
 On development draw 90009 (clean) mu 0.5 scored z -0.82 and drag 0.1 z -1.29 on one
 recording, mu 0.5 z -0.29 after the follow-up, so neither was excluded and the verdict
-did not change. The ninth evaluation set ran with the test (docs/diagnosis.md); how often
+did not change. The ninth evaluation set ran with the test (EVAL_SEEDS.md); how often
 it excluded an effect there was not recorded (the harness rows hold it from 388bf2d on).
 """
 from __future__ import annotations

@@ -57,7 +57,7 @@ SUBSTEPS = 4              # SAP steps per recording step when drake.time_step is
 # but a draw's true parameters then reproduce a harness recording worse (10-step rollouts
 # 0.47 of the noise off against 0.27, draw 8000), and on the twenty-seventh evaluation
 # set, run at half the step, the left-out confirmation named a mass on draws whose truth
-# was another effect or none (docs/diagnosis.md)
+# was another effect or none (tools/diagnosis/NOTES.md)
 FIT_WINDOWS = 100         # about this many rollout windows in the fit (window_stride)
 STRIKE_FIT_WINDOWS = 33   # and at most this many more where a strike begins
 EVAL_STRIDE = 2           # the reported error tables use every 2nd window
@@ -124,7 +124,7 @@ class DrakeBallSpec(BallSpec):
     calibrated_noise: bool = True
     # free-window effects are chosen and judged by how consistently the coasts gain
     # (engine/fit.py signed_rank_z): a drag's gain sits in a few fast coasts, which caps
-    # the paired z (docs/diagnosis.md, "Free-ball effects are judged by ranks")
+    # the paired z (tools/diagnosis/NOTES.md, "Free-ball effects are judged by ranks")
     free_z_stat: str = "signed_rank"
     # contacts that slide along the ball's side are Drake's to follow (the push gait's
     # glancing strikes, evidence.STRIKES); the LCS's relaxed cone separates such bodies

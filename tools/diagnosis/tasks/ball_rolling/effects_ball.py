@@ -162,7 +162,7 @@ class BallSpec(SystemSpec):
     # interval on the recording stays within them; one whose interval reaches one is
     # not excluded and joins `none` in the ambiguous set (evidence.not_excluded). Mass: a
     # factor of 2. The controller's ball rolling did not change with the true ball's
-    # mass over 0.3-4x the model's (scenarios/mass_sweep.yaml, docs/diagnosis.md: 3.3-3.6
+    # mass over 0.3-4x the model's (scenarios/mass_sweep.yaml, tools/diagnosis/NOTES.md: 3.3-3.6
     # turns in 60 s and 11.6-12.7 mm tracking for every mass, the same first contact),
     # and the ball is ~10 % of the pushed inertia, so pushes bound its mass loosely;
     # a simulation off by 2x is still worth naming. EE-ball mu: the controller lost
