@@ -119,3 +119,22 @@ def test_only_a_single_effect_is_read(spec):
     assert below_size(judged, spec, pair) is False and judged["verdict"] == "named"
     assert below_size(_named(), spec, None) is False
     assert below_size(dict(_named(), verdict="none"), spec, None) is False
+
+
+@pytest.mark.parametrize("cand, value, ci, shift, may", [
+    # the forty-first set's 102027 (a light ball): a table offset within its size and
+    # within the calibration tolerance, no calibration kept, took the lead and was named
+    (TABLE, -0.49e-3, [-0.94e-3, -0.26e-3], None, False),
+    (TABLE, -2.0e-3, [-2.5e-3, -1.5e-3], None, True),            # beyond its 1 mm
+    (TABLE, 0.3e-3, [0.1e-3, 0.5e-3], {"ball_table": 0.9e-3}, True),   # 1.0-1.4 mm in total
+    (TABLE, 1.3e-3, [1.1e-3, 1.5e-3], {"ball_table": -0.5e-3}, False),  # 0.6-1.0 mm in total
+    (MU, 0.7, [0.56, 0.84], None, False),                         # within 0.5 of the model's 1
+    (MU, 0.3, [0.2, 0.4], None, True),
+    (Candidate("mass_scale", "ball"), 0.41, [-0.38, 2.93], None, False),   # holds the model's 1
+])
+def test_a_lead_must_be_an_answer_the_choice_could_have_been(spec, cand, value, ci, shift, may):
+    """A left-out rival that beats the chosen effect takes its place only when it could
+    have been chosen itself (evidence.may_answer): supported, beyond its size that
+    matters, and no calibration re-estimate."""
+    from adaptive_c3.tools.diagnosis.engine.evidence import may_answer
+    assert may_answer(spec, _fit([cand], [value], [ci]), shift) is may

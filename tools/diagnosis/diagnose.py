@@ -42,7 +42,7 @@ from adaptive_c3.tools.diagnosis.backends.effects import (EFFECTS, Candidate, ap
 from adaptive_c3.tools.diagnosis.backends.patched_scenario import patched_scenario_text
 from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windows, fit_row,
                                                   free_ball_verdict, not_excluded,
-                                                  require_support, strike_onsets, supported,
+                                                  may_answer, require_support, strike_onsets,
                                                   top_pushes_only, widen_for_phases,
                                                   window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
@@ -335,10 +335,10 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     if shown is not None and shown is not chosen:     # named: beyond its size there
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)
-    def may_lead(f) -> bool:         # widened as the chosen one was, then supported
+    def may_lead(f) -> bool:         # widened as the chosen one was, then may it answer
         evidence = judged.get("evidence")
         widen(scored, none_scored, f, judged, user_base, nuisance)
-        if supported(spec, f, shift):
+        if may_answer(spec, f, shift):
             return True
         judged["evidence"] = evidence
         return False

@@ -37,7 +37,8 @@ on the left-out free windows differed by 0.5 % of what either explained) and lef
 confident wrong drag. The chosen effect leaves only
 for one fitted on the same windows (both free-ball fits or both not) that may lead the
 answer (the caller's `may_lead`: its interval, widened as the chosen one's was, clear of
-the model's value, evidence.supported); it then leads. A rival whose interval holds the
+the model's value and beyond its size that matters, and no calibration re-estimate,
+evidence.may_answer); it then leads. A rival whose interval holds the
 model's value is as consistent with the data as the model without it, so the chosen
 effect it beat stays, the rival beside it: on the thirty-fifth set's 101422 (a drag of
 0.12 N s/m, one recording) a rolling resistance beat the chosen drag at z 2.14 (bar 2.0)
@@ -127,8 +128,9 @@ def rivals_on_left_out(judged, chosen, fits, fits_free, size_prob, free_left_out
             dropped = [d for d in dropped if d is not lead_row]
             kept = [a for a in amb if not any(a is d for d in dropped)]
             next(r for r in out if r["name"] == chosen.label()).update(
-                dropped=False, kept="the effects fitted as it was that stay have 95 % "
-                "intervals holding the model's value" if same else
+                dropped=False, kept="the effects fitted as it was that stay may not "
+                "answer: an interval holding the model's value or within the size that "
+                "matters, or a calibration re-estimate" if same else
                 "no effect fitted as it was stays")
     judged["ambiguous"] = [lead_row] + [a for a in kept if a is not lead_row]
     if not dropped:
