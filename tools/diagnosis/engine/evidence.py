@@ -445,21 +445,18 @@ def supported(spec, fit, shift=None) -> bool:
 def may_answer(spec, fit, shift=None) -> bool:
     """Whether `fit` may take the place of the chosen answer (the left-out rival test's
     lead, diagnose's may_lead, after its interval is widened as the chosen one's was):
-    its 95 % interval clear of the model's value (supported), not wholly within
-    its size that matters (boundary.within_size: that answer is `none`), and, where the spec fits
-    calibration offsets, no offset whose total from the user's model is within the
-    calibration tolerance (selection._calibration_sized: that is the calibration
-    re-estimated). The choice a lead replaces passed the last two when it was made
-    (select, below_size); a lead must pass them too. On the forty-first set's 102027 (a
-    ball of 0.37x the mass, after its follow-up) a table offset of -0.49 mm [-0.94, -0.26],
-    no table calibration kept, beat the chosen mass on the left-out windows and was named:
-    a confident wrong answer that neither rule would have let be chosen."""
+    its 95 % interval clear of the model's value (supported), not wholly within its size
+    that matters (boundary.within_size: that answer is `none`), and no offset whose total
+    from the user's model is within the calibration tolerance
+    (selection.calibration_reestimate). The choice a lead replaces passed the last two
+    when it was made (select, below_size); a lead must pass them too. On the forty-first
+    set's 102027 (a ball of 0.37x the mass, after its follow-up) a table offset of -0.49
+    mm [-0.94, -0.26], no table calibration kept, beat the chosen mass on the left-out
+    windows and was named: a confident wrong answer neither rule would have chosen."""
     from adaptive_c3.tools.diagnosis.engine.boundary import within_size
-    from adaptive_c3.tools.diagnosis.engine.selection import _calibration_sized
-    if not supported(spec, fit, shift) or within_size(spec, fit, shift) is not None:
-        return False
-    calibrates = any(n == "calibration_offset" for n, _ in getattr(spec, "nuisance", ()))
-    return not (calibrates and _calibration_sized(fit, spec, shift))
+    from adaptive_c3.tools.diagnosis.engine.selection import calibration_reestimate
+    return (supported(spec, fit, shift) and within_size(spec, fit, shift) is None
+            and not calibration_reestimate(fit, spec, shift))
 
 
 def require_support(judged, spec, chosen, fits, none_eval, shift=None) -> None:

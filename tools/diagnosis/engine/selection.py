@@ -106,6 +106,13 @@ def _calibration_sized(f, spec, shift=None) -> bool:
     return False
 
 
+def calibration_reestimate(f, spec, shift=None) -> bool:
+    """_calibration_sized, where the spec fits calibration offsets as a nuisance (without
+    them no offset is calibration)."""
+    calibrates = any(n == "calibration_offset" for n, _ in getattr(spec, "nuisance", ()))
+    return calibrates and _calibration_sized(f, spec, shift)
+
+
 def base_shift(prob: Problem) -> dict:
     """{pair: m}: the calibration offsets in prob.base (the kept nuisances)."""
     from adaptive_c3.tools.diagnosis.backends.effects import calibration_sums
@@ -196,9 +203,8 @@ def select(prob: Problem, cands, progress=None, pairs: bool = True, offset: int 
                 eligible.append(f)
             if progress:
                 progress.update(offset + len(fits))
-    if any(n == "calibration_offset" for n, _ in getattr(prob.spec, "nuisance", ())):
-        shift = base_shift(prob)
-        eligible = [f for f in eligible if not _calibration_sized(f, prob.spec, shift)]
+    shift = base_shift(prob)
+    eligible = [f for f in eligible if not calibration_reestimate(f, prob.spec, shift)]
     chosen = _choose(eligible, getattr(prob.spec, "equal_reduction", 0.0))
     if chosen is not None:
         if not len(chosen.shift):
