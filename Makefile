@@ -3,6 +3,8 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 DEFAULT_SCENARIO ?= scenarios/ball_rolling.yaml
+# pytest workers (pytest-xdist): one per core of the 2-core CI machine; a test file stays on one worker
+TEST_WORKERS ?= 2
 
 .PHONY: install run test test-slow bench clean
 
@@ -19,7 +21,7 @@ run: install
 	@echo "figures and summary: runs/default/"
 
 test: install
-	$(BIN)/pytest -q --durations=15
+	$(BIN)/pytest -q -n $(TEST_WORKERS) --dist loadfile --durations=15
 
 test-slow: install
 	$(BIN)/pytest -q -m slow
