@@ -48,7 +48,13 @@ class SlipProblem(Problem):
 
 
 def _fric_fit(prob, value, ci):
-    f = Fit((FRICTION,), np.array([value]), np.array([ci]), np.array([0.3]), 0.0)
+    return scored_fit(prob, FRICTION, value, ci, 0.3)
+
+
+def scored_fit(prob, cand, value, ci, sd):
+    """(a fit of `cand` at `value` with interval `ci` and sd `sd`, scored against `none`
+    on prob's folds as select scores one, `none`'s evaluation)."""
+    f = Fit((cand,), np.array([value]), np.array([ci]), np.array([sd]), 0.0)
     none_eval = evaluate(prob, None)
     f.test_ssr, f.test_n, f.test_cluster_ssr, _ = evaluate(prob, f)
     f.reduction = 1.0 - f.test_ssr / none_eval[0]

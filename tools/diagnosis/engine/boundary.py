@@ -29,14 +29,17 @@ import functools
 
 import numpy as np
 
-from adaptive_c3.tools.diagnosis.engine.fit import Fit, cluster_z, evaluate
+from adaptive_c3.tools.diagnosis.engine.fit import cluster_z, evaluate
+from adaptive_c3.tools.diagnosis.engine.profiled_size import fixed
 
 
-def at_size(prob, cand, value: float, none_eval, per_cluster: bool = False):
+def at_size(prob, cand, value: float, none_eval, per_cluster: bool = False, sized=None):
     """z (the problem's cluster_z; positive: better than the unmodified model) of `cand`
     fixed at `value` (model units), over the held-out clusters of `prob` (none_eval =
-    evaluate(prob, None)); per_cluster: that model's per-cluster SSR instead."""
-    f = Fit((cand,), np.array([float(value)]), np.zeros((1, 2)), np.zeros(1), 0.0)
+    evaluate(prob, None)); per_cluster: that model's per-cluster SSR instead. sized:
+    (cand, value) -> the Fit to score (engine/profiled_size.sizer: the nuisances the
+    effect trades against fitted beside it), by default the candidate alone."""
+    f = (sized or fixed)(cand, value)
     _, _, ssr, _ = evaluate(prob, f)
     return ssr if per_cluster else cluster_z(none_eval[2], ssr, prob.z_stat)
 
@@ -60,7 +63,7 @@ def size_test_problem(prob, windows, fold: np.ndarray, in_fit: np.ndarray, strid
     return out
 
 
-def excluded(prob, fit, sides, none_eval, z_excl, parts=None) -> tuple[bool, list]:
+def excluded(prob, fit, sides, none_eval, z_excl, parts=None, sized=None) -> tuple[bool, list]:
     """(excluded, [(value, z, [z per recording])] tested): `sides` are (value, direction)
     of the sizes that matter the fit's interval reaches, in model units (direction -1:
     below the nominal value, +1: above). Excluded when each is clearly worse than `none`
@@ -76,7 +79,8 @@ def excluded(prob, fit, sides, none_eval, z_excl, parts=None) -> tuple[bool, lis
     experiment, and one that rules a size out is not overruled by another where the
     effect hardly shows: on the twenty-second set's 100117 (a force below its size) a
     ball of twice the mass scored z -2.25 on the first recording alone and -0.99 pooled
-    with a follow-up of glancing strikes, which left the mass beside `none`."""
+    with a follow-up of glancing strikes, which left the mass beside `none`. sized: as
+    at_size's."""
     if prob is None or not sides or len(fit.cands) != 1 or len(fit.values) != 1:
         return False, []
     groups, bar = _recordings_and_bar(parts, z_excl)
@@ -86,7 +90,7 @@ def excluded(prob, fit, sides, none_eval, z_excl, parts=None) -> tuple[bool, lis
         if direction * (v - s) >= 0.0 and fit.z_vs_none > 0.0 \
                 and _own_z(prob, fit, none_eval) > -bar:
             return False, tested
-        z, each = _z_pooled_and_alone(prob, fit.cands[0], s, none_eval, groups)
+        z, each = _z_pooled_and_alone(prob, fit.cands[0], s, none_eval, groups, sized)
         tested.append((float(s), z, each))
         if min([z, *each]) > -bar or max([z, *each]) >= bar:   # not ruled out, or disputed
             return False, tested
@@ -112,11 +116,19 @@ def _recordings_and_bar(parts, z_excl) -> tuple[list, float]:
     return groups, (z_excl(1 + len(groups)) if callable(z_excl) else float(z_excl))
 
 
-def _z_pooled_and_alone(prob, cand, value, none_eval, groups) -> tuple[float, list]:
+def _z_pooled_and_alone(prob, cand, value, none_eval, groups, sized=None):
     """(z over all clusters, [z over each recording's]) of `cand` fixed at `value` against
-    `none` (at_size)."""
-    ssr = at_size(prob, cand, value, none_eval, per_cluster=True)
-    return _z_of(none_eval[2], ssr, prob.z_stat, groups)
+    `none` (at_size), or against sized.reference(cand) where the size is profiled."""
+    ssr = at_size(prob, cand, value, none_eval, per_cluster=True, sized=sized)
+    return _z_of(_reference(prob, cand, none_eval, sized), ssr, prob.z_stat, groups)
+
+
+def _reference(prob, cand, none_eval, sized) -> np.ndarray:
+    """Per-cluster SSR a size of `cand` is compared with: `none`'s, or where the size
+    test fits nuisances beside it (profiled_size.Sizer), the model's own value with the
+    same nuisances fitted."""
+    ref = getattr(sized, "reference", lambda c: None)(cand)
+    return none_eval[2] if ref is None else evaluate(prob, ref)[2]
 
 
 def _z_of(base, ssr, stat, groups) -> tuple[float, list]:
@@ -126,7 +138,7 @@ def _z_of(base, ssr, stat, groups) -> tuple[float, list]:
             [float(cluster_z(base[g], ssr[g], stat)) for g in groups])
 
 
-def favoured_alone(prob, fit, sides, none_eval, z_excl, parts) -> list:
+def favoured_alone(prob, fit, sides, none_eval, z_excl, parts, sized=None) -> list:
     """[(value, z, [z per recording])] of the sizes `sides` ((value, direction), those the
     fit's interval did not reach or the tests excluded) that one test (pooled or one
     recording alone, at z >= z_excl(1 + k)) finds clearly better than both `none` and the
@@ -149,8 +161,8 @@ def favoured_alone(prob, fit, sides, none_eval, z_excl, parts) -> list:
                                           per_cluster=True))
     out = []
     for s, _ in sides:
-        ssr = at_size(prob, cand, s, none_eval, per_cluster=True)
-        z, each = _z_of(none_eval[2], ssr, prob.z_stat, groups)
+        ssr = at_size(prob, cand, s, none_eval, per_cluster=True, sized=sized)
+        z, each = _z_of(_reference(prob, cand, none_eval, sized), ssr, prob.z_stat, groups)
         if max([z, *each]) < bar:
             continue
         z_own, each_own = _z_of(own(), ssr, prob.z_stat, groups)

@@ -310,7 +310,11 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     excluded whatever the linearised interval says (not for offsets read through a
     calibration shift or a model-form bias, whose sizes are not the model's values). On a
     rugged cost, a fit worse than `none` on the held-out windows has its interval left
-    unread and the sizes that matter tested directly (boundary.untrusted_interval).
+    unread and the sizes that matter tested directly (boundary.untrusted_interval); so
+    are the sizes spec.always_size_tested lists ({effect: directions}), where a fit is
+    known to lean to the model's value. A size is scored with the nuisances
+    spec.size_profile lists for its effect fitted beside it on prob's windows
+    (engine/profiled_size.py: a light ball on a soft contact).
     size_prob: where the size tests are scored (boundary.size_test_problem; default
     prob); size_none: a callable giving `none`'s evaluation there (computed once);
     part_of_row [T]: the recording each row came from (several recordings diagnosed
@@ -323,8 +327,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
                                                             size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
+    from adaptive_c3.tools.diagnosis.engine.profiled_size import sizer
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
     shift = shift or {}
+    always_tested = getattr(spec, "always_size_tested", None) or {}
     if not getattr(spec, "relevant_size", None) or not (judged["verdict"] == "none"
                          or any(a["name"] == "none" for a in judged["ambiguous"])):
         return
@@ -332,6 +338,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     left_none = (size_none or functools.cache(lambda: evaluate(size_prob, None))) \
         if size_prob is not None else None
     parts = recording_parts(prob if size_prob is None else size_prob, part_of_row)
+    sized = sizer(prob, spec)     # the nuisances a size trades against, fitted beside it
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = size_that_matters(spec, c)
@@ -347,19 +354,23 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         direct = in_model_units(spec, c, shift)
         reaches = reaches_size(size, nominal, lo, hi)
         untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob)
-        if not (reaches or untrusted or (direct and parts is not None)):
+        always = [] if reaches or untrusted or not direct or prob is None else [
+            s for s in size_sides(c, spec, nominal, size)
+            if s[1] in always_tested.get(c.name, ())]
+        if not (reaches or untrusted or always or (direct and parts is not None)):
             continue
-        # (size that matters, -1 below / +1 above): those the interval reaches, or all
+        # (size that matters, -1 below / +1 above): those the interval reaches, or all,
+        # or those the spec tests always
         sides = size_sides(c, spec, nominal, size, None if untrusted else (lo, hi)) \
-            if direct and (reaches or untrusted) else []
+            if direct and (reaches or untrusted) else always
         if untrusted and not sides:
             continue
         sp, ne = (prob, none_eval) if size_prob is None else (size_prob, left_none())
-        out, tested = excluded(sp, f, sides, ne, size_z, parts) if reaches or untrusted \
-            else (True, [])
+        out, tested = excluded(sp, f, sides, ne, size_z, parts, sized) \
+            if reaches or untrusted or always else (True, [])
         # the other sizes, where one recording alone may find the effect clearly better
         favoured = favoured_alone(sp, f, [x for x in size_sides(c, spec, nominal, size)
-                                          if x not in sides], ne, size_z, parts) \
+                                          if x not in sides], ne, size_z, parts, sized) \
             if out and direct else []
         if tested or favoured:
             judged.setdefault("size_tests", []).append(dict(
@@ -380,6 +391,9 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
                f"{lo:.3g}..{hi:.3g} is not read, and the size that matters (the model's "
                f"{nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}) is not clearly worse than "
                f"`none` there" if untrusted else
+               f"its 95 % interval {lo:.3g}..{hi:.3g} is not read at this size that "
+               f"matters (the model's fit leans to its own value there), and the model "
+               f"fixed at {always[0][0]:.3g} is not clearly worse than `none`" if always else
                f"its 95 % interval {lo:.3g}..{hi:.3g} reaches a size that matters (the "
                f"model's {nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}){where}")
         _join(judged, fit_row(None, none_eval), dict(
