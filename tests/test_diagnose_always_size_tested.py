@@ -135,12 +135,12 @@ def test_a_light_ball_on_a_soft_contact_is_tested_with_the_stiffness_fitted():
     """Data of a 0.47x ball on a 0.5x stiffness (102110's): at the model's stiffness the
     mass at 0.5x doubles the contact frequency and is clearly worse than `none`; with
     the stiffness fitted beside it (on the fit windows) it is not, and joins `none`."""
-    from adaptive_c3.tools.diagnosis.engine.profiled_size import sizer
+    from adaptive_c3.tools.diagnosis.engine.profiled_size import Sizer
     spec = _profiled_spec()
     prob = FrequencyProblem(spec, truth=0.47, truth_k=0.5)
     fit, none_eval = _leaning_fit(prob)
     assert at_size(prob, MASS, 0.5, none_eval) < -3.0            # the stiffness rules it out
-    sized = sizer(prob, spec)
+    sized = Sizer(prob, spec)
     profiled = sized(MASS, 0.5)
     assert [c.name for c in profiled.cands] == ["mass_scale", "stiffness_calibration"]
     assert abs(profiled.values[1] / 1e5 - 0.5 * 0.5 / 0.47) < 0.05   # k / m matched
@@ -158,13 +158,13 @@ def test_a_nominal_ball_on_a_soft_contact_is_still_ruled_out(kept):
     `none` stays confident. Not kept, `none` itself misses the frequency: the size is
     compared with the model's mass with the stiffness fitted too (Sizer.reference), not
     with `none`, which the fitted stiffness alone would beat."""
-    from adaptive_c3.tools.diagnosis.engine.profiled_size import sizer
+    from adaptive_c3.tools.diagnosis.engine.profiled_size import Sizer
     spec = _profiled_spec()
     prob = FrequencyProblem(spec, truth=1.0, truth_k=0.5, inertia=3.0)
     prob.base = [(STIFF, np.array([5e4]))] if kept else []
     fit, none_eval = _leaning_fit(prob)
     if not kept:
-        assert at_size(prob, MASS, 0.5, none_eval, sized=sizer(prob, spec)) > 3.0
+        assert at_size(prob, MASS, 0.5, none_eval, sized=Sizer(prob, spec)) > 3.0
     judged = verdict([fit], None, none_eval, 0.1)
     not_excluded(judged, spec, [fit], none_eval, prob=prob)
     assert judged["verdict"] == "none" and judged["ambiguous"] == []

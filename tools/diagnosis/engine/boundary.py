@@ -37,7 +37,7 @@ def at_size(prob, cand, value: float, none_eval, per_cluster: bool = False, size
     """z (the problem's cluster_z; positive: better than the unmodified model) of `cand`
     fixed at `value` (model units), over the held-out clusters of `prob` (none_eval =
     evaluate(prob, None)); per_cluster: that model's per-cluster SSR instead. sized:
-    (cand, value) -> the Fit to score (engine/profiled_size.sizer: the nuisances the
+    (cand, value) -> the Fit to score (engine/profiled_size.Sizer: the nuisances the
     effect trades against fitted beside it), by default the candidate alone."""
     f = (sized or fixed)(cand, value)
     _, _, ssr, _ = evaluate(prob, f)
@@ -127,8 +127,9 @@ def _reference(prob, cand, none_eval, sized) -> np.ndarray:
     """Per-cluster SSR a size of `cand` is compared with: `none`'s, or where the size
     test fits nuisances beside it (profiled_size.Sizer), the model's own value with the
     same nuisances fitted."""
-    ref = getattr(sized, "reference", lambda c: None)(cand)
-    return none_eval[2] if ref is None else evaluate(prob, ref)[2]
+    if not hasattr(sized, "reference_ssr"):
+        return none_eval[2]
+    return sized.reference_ssr(prob, cand, none_eval[2])
 
 
 def _z_of(base, ssr, stat, groups) -> tuple[float, list]:

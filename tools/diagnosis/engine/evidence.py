@@ -327,7 +327,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
                                                             size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
-    from adaptive_c3.tools.diagnosis.engine.profiled_size import sizer
+    from adaptive_c3.tools.diagnosis.engine.profiled_size import Sizer
     from adaptive_c3.tools.diagnosis.engine.report import physical_interval
     shift = shift or {}
     always_tested = getattr(spec, "always_size_tested", None) or {}
@@ -338,7 +338,7 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     left_none = (size_none or functools.cache(lambda: evaluate(size_prob, None))) \
         if size_prob is not None else None
     parts = recording_parts(prob if size_prob is None else size_prob, part_of_row)
-    sized = sizer(prob, spec)     # the nuisances a size trades against, fitted beside it
+    sized = Sizer(prob, spec)     # the nuisances a size trades against, fitted beside it
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = size_that_matters(spec, c)

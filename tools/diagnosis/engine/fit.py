@@ -70,6 +70,12 @@ class Problem:
         cut = Windows(W.X0, W.Xt[:, :horizon], W.U[:, :LAG + horizon], W.row, W.episode, W.t0)
         return replace(self, windows=cut, weight=self.weight[:horizon])
 
+    def present(self, c) -> np.ndarray:
+        """The value candidate `c` has in the base model (a kept nuisance; the last one
+        listed, which the patch applies last), else its nominal value."""
+        return next((np.asarray(v, float) for b, v in reversed(self.base) if b == c),
+                    np.asarray(c.nominal(self.spec), float))
+
     def residuals(self, effects, W: Windows) -> np.ndarray:
         """[W, H, n] normalised rollout residuals of the model with `effects` added."""
         P = patch(self.spec, self.base + list(effects))

@@ -56,8 +56,7 @@ def compliance_variants(prob) -> list:
             continue
         c = Candidate(name, target)
         lo, hi = (float(b[0]) for b in c.bounds(prob.spec))
-        present = next((float(p[0]) for cc, p in prob.base if cc == c),
-                       float(c.nominal(prob.spec)[0]))
+        present = float(prob.present(c)[0])
         rest = [(cc, p) for cc, p in prob.base if cc != c]
         for f in COMPLIANCE_STEPS:
             variant = copy.copy(prob)

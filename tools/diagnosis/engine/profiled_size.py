@@ -24,20 +24,12 @@ import copy
 import numpy as np
 
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-from adaptive_c3.tools.diagnosis.engine.fit import Fit, fit_candidates
+from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate, fit_candidates
 
 
 def fixed(cand, value: float) -> Fit:
     """The model with `cand` fixed at `value` (model units), nothing else fitted."""
     return Fit((cand,), np.array([float(value)]), np.zeros((1, 2)), np.zeros(1), 0.0)
-
-
-def _base_value(prob, c) -> np.ndarray:
-    """The value `c` has in prob's base model (a kept nuisance), else its nominal one."""
-    for b, v in reversed(prob.base):
-        if b == c:
-            return np.asarray(v, float)
-    return np.asarray(c.nominal(prob.spec), float)
 
 
 class Sizer:
@@ -52,7 +44,7 @@ class Sizer:
     def __init__(self, train, spec):
         self.train, self.spec = train, spec
         self.profile = (getattr(spec, "size_profile", None) or {}) if train is not None else {}
-        self._fits = {}
+        self._fits, self._reference_ssr = {}, {}
 
     def __call__(self, cand, value: float) -> Fit:
         nuis = [Candidate(n, t) for n, t in self.profile.get(cand.name, ())]
@@ -68,10 +60,22 @@ class Sizer:
             return None
         return self(cand, float(cand.nominal(self.spec)[0]))
 
+    def reference_ssr(self, prob, cand, none_ssr: np.ndarray) -> np.ndarray:
+        """Per-cluster SSR on `prob` (the problem a size test is scored on) that a size
+        of `cand` is compared with: the reference's (evaluated once per problem), or
+        `none_ssr` for a candidate without a profile."""
+        ref = self.reference(cand)
+        if ref is None:
+            return none_ssr
+        key = (id(prob), cand)
+        if key not in self._reference_ssr:
+            self._reference_ssr[key] = evaluate(prob, ref)[2]
+        return self._reference_ssr[key]
+
     def _profiled(self, cand, value: float, nuis: list) -> Fit:
         train, start = self.train, getattr(self.spec, "profile_start", None)
         init = np.concatenate([
-            (start(cand, value, c, _base_value(train, c)) if start else _base_value(train, c))
+            (start(cand, value, c, train.present(c)) if start else train.present(c))
             for c in nuis])
         at = copy.copy(train)
         at.base = list(train.base) + [(cand, np.array([value]))]
@@ -79,7 +83,3 @@ class Sizer:
         return Fit((cand, *nuis), np.concatenate([[value], f.values]),
                    np.zeros((1 + len(f.values), 2)), np.zeros(1 + len(f.values)), 0.0)
 
-
-def sizer(train, spec) -> Sizer:
-    """The size tests' models for `train`'s spec (Sizer)."""
-    return Sizer(train, spec)
