@@ -169,3 +169,37 @@ def test_a_nominal_ball_on_a_soft_contact_is_still_ruled_out(kept):
     not_excluded(judged, spec, [fit], none_eval, prob=prob)
     assert judged["verdict"] == "none" and judged["ambiguous"] == []
     assert judged["size_tests"][0]["excluded"] is True
+
+
+class BumpyFrequencyProblem(FrequencyProblem):
+    """FrequencyProblem whose contact states also carry a ripple in log k: a rugged cost
+    (Drake's staircase), where a profiled fit stays in the dip it starts in."""
+
+    def residuals(self, effects, W):
+        r = super().residuals(effects, W)
+        effects = list(self.base) + list(effects)
+        k = next((float(v[0]) for c, v in reversed(effects)
+                  if c.name == "stiffness_calibration"), 1e5) / 1e5
+        r[..., :10] += np.sin(12.0 * np.log(k))
+        return r
+
+
+@pytest.mark.parametrize("grid", [0, 5])
+def test_a_size_and_its_reference_start_from_the_same_points(monkeypatch, grid):
+    """Data of the model's ball on a 0.3x contact, a rugged cost in the stiffness: from the
+    model's stiffness the reference's fit stays in a dip far from 0.3x, while the size's
+    start (the stiffness scaled with the mass) lands near its own best, so without the
+    grid of starts the 0.5x ball beats the reference on the data of a nominal ball. With
+    the same grid of starts for both, the reference fits the contact as well as the size
+    does, and the ball's own share of the motion rules 0.5x out."""
+    from adaptive_c3.tools.diagnosis.engine import profiled_size
+    from adaptive_c3.tools.diagnosis.engine.fit import cluster_z
+    monkeypatch.setattr(profiled_size, "PROFILE_GRID", grid)
+    spec = _profiled_spec()
+    prob = BumpyFrequencyProblem(spec, truth=1.0, truth_k=0.3, inertia=0.3)
+    fit, none_eval = _leaning_fit(prob)
+    sized = profiled_size.Sizer(prob, spec)
+    ref_ssr = sized.reference_ssr(prob, MASS, none_eval[2])
+    size_ssr = at_size(prob, MASS, 0.5, none_eval, per_cluster=True, sized=sized)
+    z = cluster_z(ref_ssr, size_ssr, prob.z_stat)      # > 0: the size beats the reference
+    assert (z > 2.0) if grid == 0 else (z < -2.0)

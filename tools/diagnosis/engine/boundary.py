@@ -419,14 +419,19 @@ def ruled_out_members(judged) -> list[str]:
     return labels
 
 
-def in_model_units(spec, cand, shift=None) -> bool:
+def in_model_units(spec, cand) -> bool:
     """Whether `cand`'s sizes that matter are values of the model itself, so that the model
-    fixed there can be rolled out: not an offset read through a calibration shift {pair:
-    m} (its size is the total from the user's model), nor an effect with a measured
-    model-form bias (spec.model_form_bias: its size is the physical value)."""
-    shift, mf = shift or {}, getattr(spec, "model_form_bias", None) or {}
-    offset = shift.get(cand.target, 0.0) if cand.name == "contact_offset" else 0.0
-    return offset == 0.0 and cand.label() not in mf
+    fixed there can be rolled out: not an effect with a measured model-form bias
+    (spec.model_form_bias: its size is the physical value)."""
+    return cand.label() not in (getattr(spec, "model_form_bias", None) or {})
+
+
+def calibration_under(cand, shift=None) -> float:
+    """m: the calibration offset kept for `cand`'s pair (shift {pair: m},
+    report.calibration_shift) when `cand` is a contact_offset fitted on top of it, else 0.
+    Such an offset's sizes that matter are totals from the user's model: the model value
+    that gives the total `s` is s - calibration_under(cand, shift)."""
+    return (shift or {}).get(cand.target, 0.0) if cand.name == "contact_offset" else 0.0
 
 
 def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
@@ -445,7 +450,8 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
     (at_size), cluster by cluster over the left-out windows (size_test_problem). Both at
     z >= z_bar(members tested) (evidence.worse_z): `none` is then wrong only if both
     comparisons err for one member (an intersection-union test, each at its share of
-    5 %). Skipped for an offset read through a calibration shift or a measured model-form
+    5 %). An offset read through a calibration shift is tested at the total from the
+    user's model (calibration_under); skipped for an effect with a measured model-form
     bias, whose sizes are not the model's values (in_model_units). Recorded as
     judged["beyond_size"]."""
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
@@ -462,14 +468,15 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None):
             continue
         c = f.cands[0]
         size = size_that_matters(spec, c)
-        if size is None or not in_model_units(spec, c, shift):
+        if size is None or not in_model_units(spec, c):
             continue
-        v, nominal = float(f.values[0]), float(c.nominal(spec)[0])
+        add = calibration_under(c, shift)      # sizes are totals from the user's model
+        v, nominal = float(f.values[0]) + add, float(c.nominal(spec)[0])
         side = [s for s, d in size_sides(c, spec, nominal, size) if d * (v - s) >= 0.0]
         if not side:
             continue
         _, _, fit_c, _ = evaluate(size_prob, f)
-        size_c = at_size(size_prob, c, side[0], None, per_cluster=True)
+        size_c = at_size(size_prob, c, side[0] - add, None, per_cluster=True)
         tests.append(dict(name=c.label(), value=v, size=float(side[0]),
                           z_vs_none=float(cluster_z(size_none()[2], fit_c, size_prob.z_stat)),
                           z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat))))

@@ -307,12 +307,17 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     model-form bias, widened by its spread). prob (the problem none_eval was scored on):
     an interval that reaches a size is checked by the model fixed at that size
     (engine/boundary.py); a size clearly worse than `none` on the held-out windows is
-    excluded whatever the linearised interval says (not for offsets read through a
-    calibration shift or a model-form bias, whose sizes are not the model's values). On a
-    rugged cost, a fit worse than `none` on the held-out windows has its interval left
-    unread and the sizes that matter tested directly (boundary.untrusted_interval); so
-    are the sizes spec.always_size_tested lists ({effect: directions}), where a fit is
-    known to lean to the model's value. A size is scored with the nuisances
+    excluded whatever the linearised interval says (an offset read through a
+    calibration shift at its total, boundary.calibration_under; not an effect with a
+    model-form bias, whose sizes are not the model's values). On a rugged cost, a fit
+    worse than `none` on the held-out windows has its interval left unread and the sizes
+    that matter tested directly (boundary.untrusted_interval); so are the sizes
+    spec.always_size_tested lists ({effect: directions}), where a fit is known to lean to
+    the model's value, and an offset's size on the side its pair's calibration took: the
+    offset is fitted from 0 on top of the calibration and leans there (the forty-third
+    set's 102234, an EE-ball offset of -1.04 mm: the calibration took -0.70 mm, the offset
+    read 0 +-0.13 mm, and the total fixed at -1 mm scored z -1.7 against `none`, not
+    clearly worse, yet was never tested). A size is scored with the nuisances
     spec.size_profile lists for its effect fitted beside it on prob's windows
     (engine/profiled_size.py: a light ball on a soft contact).
     size_prob: where the size tests are scored (boundary.size_test_problem; default
@@ -321,10 +326,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     together: each is also tested alone, boundary.excluded, and a size outside the
     pooled interval that one of them finds clearly better keeps the effect beside
     `none`, boundary.favoured_alone)."""
-    from adaptive_c3.tools.diagnosis.engine.boundary import (excluded, favoured_alone,
-                                                            in_model_units, reaches_size,
-                                                            recording_parts, size_sides,
-                                                            size_that_matters,
+    from adaptive_c3.tools.diagnosis.engine.boundary import (calibration_under, excluded,
+                                                            favoured_alone, in_model_units,
+                                                            reaches_size, recording_parts,
+                                                            size_sides, size_that_matters,
                                                             untrusted_interval)
     from adaptive_c3.tools.diagnosis.engine.fit import evaluate
     from adaptive_c3.tools.diagnosis.engine.profiled_size import Sizer
@@ -348,30 +353,36 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
         nominal = float(c.nominal(spec)[0])
         src = free.get(f.cands, f)
         lo, hi = np.asarray(src.ci, float)[0]
-        add = shift.get(c.target, 0.0) if c.name == "contact_offset" else 0.0
+        add = calibration_under(c, shift)   # sizes and interval: totals from the user's model
         _, lo, hi, _ = physical_interval(spec, c, float(src.values[0]) + add, lo + add,
                                          hi + add, float(src.sd[0]))
-        direct = in_model_units(spec, c, shift)
+        direct = in_model_units(spec, c) and prob is not None
         reaches = reaches_size(size, nominal, lo, hi)
         untrusted = not reaches and direct and untrusted_interval(spec, f, free, prob)
-        always = [] if reaches or untrusted or not direct or prob is None else [
+        # sizes tested whatever the interval says, on the side a fit leans from: those
+        # the spec lists, and for an offset on top of its pair's calibration the side the
+        # calibration took (the offset's fit starts at, and leans to, the calibration)
+        always = [] if reaches or untrusted or not direct else [
             s for s in size_sides(c, spec, nominal, size)
-            if s[1] in always_tested.get(c.name, ())]
+            if s[1] in always_tested.get(c.name, ()) or s[1] * add > 0.0]
         if not (reaches or untrusted or always or (direct and parts is not None)):
             continue
-        # (size that matters, -1 below / +1 above): those the interval reaches, or all,
-        # or those the spec tests always
+        # (size that matters as a total, -1 below / +1 above): those the interval
+        # reaches, or all, or those tested always
         sides = size_sides(c, spec, nominal, size, None if untrusted else (lo, hi)) \
             if direct and (reaches or untrusted) else always
         if untrusted and not sides:
             continue
+        in_model = [(s - add, d) for s, d in sides]          # the model's values there
         sp, ne = (prob, none_eval) if size_prob is None else (size_prob, left_none())
-        out, tested = excluded(sp, f, sides, ne, size_z, parts, sized) \
+        out, tested = excluded(sp, f, in_model, ne, size_z, parts, sized) \
             if reaches or untrusted or always else (True, [])
         # the other sizes, where one recording alone may find the effect clearly better
-        favoured = favoured_alone(sp, f, [x for x in size_sides(c, spec, nominal, size)
-                                          if x not in sides], ne, size_z, parts, sized) \
+        favoured = favoured_alone(sp, f, [(s - add, d) for s, d in size_sides(
+            c, spec, nominal, size) if (s, d) not in sides], ne, size_z, parts, sized) \
             if out and direct else []
+        tested = [(v + add, z, e) for v, z, e in tested]      # reported as totals
+        favoured = [(v + add, z, e) for v, z, e in favoured]
         if tested or favoured:
             judged.setdefault("size_tests", []).append(dict(
                 name=c.label(), excluded=bool(out and not favoured),
@@ -391,6 +402,10 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
                f"{lo:.3g}..{hi:.3g} is not read, and the size that matters (the model's "
                f"{nominal:.3g} -{size[0]:.3g}/+{size[1]:.3g}) is not clearly worse than "
                f"`none` there" if untrusted else
+               f"its 95 % interval {lo:.3g}..{hi:.3g} (a total, on top of the pair's "
+               f"calibration of {add:.3g}) is not read at this size that matters (the fit "
+               f"leans to the calibration), and the total fixed at {always[0][0]:.3g} is "
+               f"not clearly worse than `none`" if always and add else
                f"its 95 % interval {lo:.3g}..{hi:.3g} is not read at this size that "
                f"matters (the model's fit leans to its own value there), and the model "
                f"fixed at {always[0][0]:.3g} is not clearly worse than `none`" if always else
