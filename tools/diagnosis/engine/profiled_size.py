@@ -102,6 +102,7 @@ class Sizer:
         if first.num_params(self.spec) == 1 and len(grid):
             pick = np.unique(np.linspace(0, len(grid) - 1, PROFILE_GRID).round().astype(int))
             starts += [np.concatenate([[g], *present[1:]]) for g in grid[pick]]
+        starts = list({tuple(x): x for x in starts}.values())   # each once, in order
         W = at.used()
         cost = [float(np.sum(at.residuals(_split(x, nuis, self.spec), W) ** 2))
                 for x in starts]
