@@ -203,3 +203,46 @@ def test_a_size_and_its_reference_start_from_the_same_points(monkeypatch, grid):
     size_ssr = at_size(prob, MASS, 0.5, none_eval, per_cluster=True, sized=sized)
     z = cluster_z(ref_ssr, size_ssr, prob.z_stat)      # > 0: the size beats the reference
     assert (z > 2.0) if grid == 0 else (z < -2.0)
+
+
+TAU = Candidate("dissipation_calibration", "contacts")
+
+
+class BumpyDampingProblem(FrequencyProblem):
+    """FrequencyProblem whose contact states also carry the gap to the data's relaxation
+    time (`truth_tau` x the model's), on a ripple in log tau: a profiled fit started at
+    the model's relaxation time stays in the dip it starts in."""
+
+    def __init__(self, spec, truth_tau: float, **kw):
+        super().__init__(spec, **kw)
+        self.truth_tau = truth_tau
+
+    def residuals(self, effects, W):
+        r = super().residuals(effects, W)
+        effects = list(self.base) + list(effects)
+        tau = next((float(v[0]) for c, v in reversed(effects)
+                    if c.name == "dissipation_calibration"), 2e-3) / 2e-3
+        gap = np.log(tau / self.truth_tau)
+        r[..., :10] += 3.0 * gap + 2.0 * np.sin(9.0 * np.log(tau))
+        return r
+
+
+@pytest.mark.parametrize("scales", [(1.0,), (0.5, 1.0, 2.0)])
+def test_a_profiled_fit_starts_from_the_second_nuisance_scaled_too(monkeypatch, scales):
+    """Data of a 0.5x ball on a contact with twice the model's relaxation time and a
+    rugged cost in it: started at the model's relaxation time the profiled fit stays in
+    a dip far from 2x; with starts at 0.5, 1 and 2x it (profiled_size.SECOND_SCALES)
+    the fit lands by the truth, at a lower training cost."""
+    from adaptive_c3.tools.diagnosis.engine import profiled_size
+    monkeypatch.setattr(profiled_size, "SECOND_SCALES", scales)
+    spec = _profiled_spec()
+    spec.relaxation_groups = {"contacts": ((0, 1), 2e-3)}
+    spec.size_profile = {"mass_scale": (("stiffness_calibration", "contacts"),
+                                        ("dissipation_calibration", "contacts"))}
+    prob = BumpyDampingProblem(spec, truth_tau=2.0, truth=0.5, truth_k=0.5)
+    sized = profiled_size.Sizer(prob, spec)
+    fitted = sized(MASS, 0.5)
+    assert [c.name for c in fitted.cands] == ["mass_scale", "stiffness_calibration",
+                                              "dissipation_calibration"]
+    tau = fitted.values[2] / 2e-3
+    assert (abs(np.log(tau / 2.0)) < 0.1) == (len(scales) == 3)
