@@ -102,6 +102,13 @@ def test_without_a_problem_to_test_on_the_interval_decides():
 STIFF = Candidate("stiffness_calibration", "contacts")
 
 
+def _value(prob, effects, name: str, default: float) -> float:
+    """The value of effect `name` among the problem's base and `effects` (later ones
+    override), or `default`."""
+    return next((float(v[0]) for c, v in reversed(list(prob.base) + list(effects))
+                 if c.name == name), default)
+
+
 class FrequencyProblem(MassProblem):
     """Windows whose residual grows in some states with the gap between the model's
     contact frequency, log(k / m), and the data's (a light ball on a soft contact), and
@@ -112,10 +119,8 @@ class FrequencyProblem(MassProblem):
         self.truth_k, self.inertia = truth_k, inertia
 
     def residuals(self, effects, W):
-        effects = list(self.base) + list(effects)          # later effects override
-        m = next((float(v[0]) for c, v in reversed(effects) if c.name == "mass_scale"), 1.0)
-        k = next((float(v[0]) for c, v in reversed(effects)
-                  if c.name == "stiffness_calibration"), 1e5) / 1e5
+        m = _value(self, effects, "mass_scale", 1.0)
+        k = _value(self, effects, "stiffness_calibration", 1e5) / 1e5
         gap = np.log(k / m) - np.log(self.truth_k / self.truth)
         r = self.noise[W.row // 10].copy()
         r[..., :10] += 4.0 * gap                    # the contact's states
@@ -177,9 +182,7 @@ class BumpyFrequencyProblem(FrequencyProblem):
 
     def residuals(self, effects, W):
         r = super().residuals(effects, W)
-        effects = list(self.base) + list(effects)
-        k = next((float(v[0]) for c, v in reversed(effects)
-                  if c.name == "stiffness_calibration"), 1e5) / 1e5
+        k = _value(self, effects, "stiffness_calibration", 1e5) / 1e5
         r[..., :10] += np.sin(12.0 * np.log(k))
         return r
 
@@ -205,9 +208,6 @@ def test_a_size_and_its_reference_start_from_the_same_points(monkeypatch, grid):
     assert (z > 2.0) if grid == 0 else (z < -2.0)
 
 
-TAU = Candidate("dissipation_calibration", "contacts")
-
-
 class BumpyDampingProblem(FrequencyProblem):
     """FrequencyProblem whose contact states also carry the gap to the data's relaxation
     time (`truth_tau` x the model's), on a ripple in log tau: a profiled fit started at
@@ -219,9 +219,7 @@ class BumpyDampingProblem(FrequencyProblem):
 
     def residuals(self, effects, W):
         r = super().residuals(effects, W)
-        effects = list(self.base) + list(effects)
-        tau = next((float(v[0]) for c, v in reversed(effects)
-                    if c.name == "dissipation_calibration"), 2e-3) / 2e-3
+        tau = _value(self, effects, "dissipation_calibration", 2e-3) / 2e-3
         gap = np.log(tau / self.truth_tau)
         r[..., :10] += 3.0 * gap + 2.0 * np.sin(9.0 * np.log(tau))
         return r

@@ -105,7 +105,7 @@ class Sizer:
                                           for c, p in zip(nuis, present)]))
         first = nuis[0]
         grid = np.asarray(first.definition().grid(self.spec, first.target), float)
-        if first.num_params(self.spec) == 1 and len(grid) and PROFILE_GRID:
+        if first.num_params(self.spec) == 1 and len(grid):
             pick = np.unique(np.linspace(0, len(grid) - 1, PROFILE_GRID).round().astype(int))
             seconds = [present[1:]]
             if len(nuis) > 1 and nuis[1].num_params(self.spec) == 1:
