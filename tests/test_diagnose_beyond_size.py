@@ -4,6 +4,7 @@ where the linearised interval, wide on a staircase cost, cannot say."""
 import functools
 
 import numpy as np
+import pytest
 
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.boundary import beyond_size
@@ -11,7 +12,7 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (fit_row, not_excluded, 
                                                         worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate
 from adaptive_c3.tools.diagnosis.engine.report import ambiguity_summary
-from tests.test_diagnose_size_test import FRICTION, SlipProblem, _fric_fit, _spec
+from tests.test_diagnose_size_test import FRICTION, SlipProblem, _fric_fit, _spec, scored_fit
 
 MASS = Candidate("mass_scale", "ball")
 
@@ -64,8 +65,9 @@ def test_a_fit_within_its_size_is_not_tested():
 
 
 def test_none_leaves_a_larger_set_and_the_rest_are_separated_from_the_effect():
-    """[none, mu, mass] with mu shown beyond its size: `none` leaves, mu goes first and
-    the follow-up proposed separates mu from the mass (not either from `none`)."""
+    """[none, mu, mass] with mu shown beyond its size: `none` leaves, mu goes first (and
+    is returned: the answer is the set's lead, not the `none` the set no longer holds)
+    and the follow-up proposed separates mu from the mass (not either from `none`)."""
     spec = _spec()
     prob = SlipProblem(spec, truth_mu=0.3)
     fric, none_eval = _fric_fit(prob, 0.32, [0.1, 0.9])
@@ -76,8 +78,35 @@ def test_none_leaves_a_larger_set_and_the_rest_are_separated_from_the_effect():
         fit_row(None, none_eval), fit_row(mass, none_eval), fit_row(fric, none_eval)])
     shown = beyond_size(judged, spec, [fric, mass], prob,
                         functools.cache(lambda: evaluate(prob, None)), worse_z)
-    assert shown is None and judged["verdict"] == "ambiguous"
+    assert shown is fric and judged["verdict"] == "ambiguous"
     assert [a["name"] for a in judged["ambiguous"]] == [FRICTION.name, MASS.name]
     assert [p["between"] for p in judged["separating_excitation"]] == \
         [[FRICTION.name, MASS.name]]
     assert [t["name"] for t in judged["beyond_size"]] == [FRICTION.label()]
+
+
+@pytest.mark.parametrize("profiled", [False, True])
+def test_a_mass_that_trades_with_the_contact_is_tested_with_the_contact_fitted(profiled):
+    """Data of the model's ball on a contact 4x as stiff as the model's (the contact
+    frequency of a 0.25x ball on the model's contact), the mass fitted at 0.25x: at the
+    model's stiffness it beats `none` and 0.5x and takes `none` out of the set (102425's
+    wrong turn). With the stiffness fitted beside each side (the Sizer), the model's mass
+    on a fitted contact matches the data and the ball's own share of the motion rules
+    0.25x out, so `none` stays."""
+    from adaptive_c3.tools.diagnosis.engine.profiled_size import Sizer
+    from tests.test_diagnose_always_size_tested import FrequencyProblem, _profiled_spec
+    spec = _profiled_spec()
+    prob = FrequencyProblem(spec, truth=1.0, truth_k=4.0, inertia=1.0)
+    mass, none_eval = scored_fit(prob, MASS, 0.25, [0.2, 0.3], 0.025)
+    judged = dict(verdict="ambiguous", separating_excitation=[], ambiguous=[
+        fit_row(None, none_eval), fit_row(mass, none_eval)])
+    shown = beyond_size(judged, spec, [mass], prob,
+                        functools.cache(lambda: evaluate(prob, None)), worse_z,
+                        sized=Sizer(prob, spec) if profiled else None)
+    t = judged["beyond_size"][0]
+    assert t["beyond"] is (not profiled)
+    if profiled:
+        assert shown is None and t["z_vs_none"] < -2.0
+        assert [a["name"] for a in judged["ambiguous"]] == ["none", MASS.name]
+    else:
+        assert shown is mass and judged["verdict"] == "named"

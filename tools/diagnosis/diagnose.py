@@ -55,6 +55,7 @@ from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_ou
 from adaptive_c3.tools.diagnosis.engine.user_model_check import per_episode_ssr, worse_than_user
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
 from adaptive_c3.tools.diagnosis.engine.joint_refit import refit_with_calibration
+from adaptive_c3.tools.diagnosis.engine.profiled_size import Sizer
 from adaptive_c3.tools.diagnosis.engine.locate import (calibrate_noise, contact_summary,
                                                        estimate_noise, locate, make_windows,
                                                        prediction_floor)
@@ -325,14 +326,18 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     left_none = functools.cache(lambda: evaluate(left_out, None))   # `none` there, once
     if any(chosen is f for f in fits):     # judged on all windows (not the free ones)
         confirm_on_left_out(judged, chosen, left_out, left_none, Z_AMBIG, prob, nuisance)
+    sized = Sizer(prob, spec)       # sizes with the nuisances they trade against fitted
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
-                 size_prob=left_out, size_none=left_none, part_of_row=rec.extras.get("part"))
+                 size_prob=left_out, size_none=left_none, part_of_row=rec.extras.get("part"),
+                 sized=sized)
     gone = ruled_out_members(judged)     # every size that matters ruled out: too small
     if chosen is not None and chosen.label() in gone:
         chosen = None
         judged["ambiguous"].sort(key=lambda a: a["name"] != "none")    # `none` leads
-    shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift)
-    if shown is not None and shown is not chosen:     # named: beyond its size there
+    shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift, sized)
+    # named: beyond its size there; or the lead of a set `none` left, where none answered
+    if shown is not None and shown is not chosen and (judged["verdict"] == "named"
+                                                      or chosen is None):
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)
     def may_lead(f) -> bool:         # widened as the chosen one was, then may it answer

@@ -291,7 +291,7 @@ def _join(judged, first: dict, other: dict, how: tuple | None = None) -> None:
 
 
 def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=None,
-                 size_prob=None, size_none=None, part_of_row=None) -> None:
+                 size_prob=None, size_none=None, part_of_row=None, sized=None) -> None:
     """A `none` (the verdict, or a member of the ambiguous set) claims that the data rule
     out every effect of a size that matters (spec.relevant_size: (below, above) the
     nominal value). A single physical effect whose 95 % interval reaches that far is as
@@ -325,7 +325,8 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     part_of_row [T]: the recording each row came from (several recordings diagnosed
     together: each is also tested alone, boundary.excluded, and a size outside the
     pooled interval that one of them finds clearly better keeps the effect beside
-    `none`, boundary.favoured_alone)."""
+    `none`, boundary.favoured_alone); sized: the profiled_size.Sizer to score sizes with
+    (default: one on prob)."""
     from adaptive_c3.tools.diagnosis.engine.boundary import (calibration_under, excluded,
                                                             favoured_alone, in_model_units,
                                                             reaches_size, recording_parts,
@@ -343,7 +344,8 @@ def not_excluded(judged, spec, fits, none_eval, fits_free=(), shift=None, prob=N
     left_none = (size_none or functools.cache(lambda: evaluate(size_prob, None))) \
         if size_prob is not None else None
     parts = recording_parts(prob if size_prob is None else size_prob, part_of_row)
-    sized = Sizer(prob, spec)     # the nuisances a size trades against, fitted beside it
+    # the nuisances a size trades against, fitted beside it (shared with beyond_size)
+    sized = sized if sized is not None else Sizer(prob, spec)
     for f in (f for f in fits if len(f.cands) == 1 and f.physical):
         c = f.cands[0]
         size = size_that_matters(spec, c)
