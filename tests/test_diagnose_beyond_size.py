@@ -108,5 +108,18 @@ def test_a_mass_that_trades_with_the_contact_is_tested_with_the_contact_fitted(p
     if profiled:
         assert shown is None and t["z_vs_none"] < -2.0
         assert [a["name"] for a in judged["ambiguous"]] == ["none", MASS.name]
+        assert t["fitted_beside"] == ["stiffness_calibration[contacts]"]
     else:
         assert shown is mass and judged["verdict"] == "named"
+        assert "fitted_beside" not in t
+
+
+def test_the_report_says_what_was_fitted_beside_a_profiled_effect():
+    """A mass shown beyond its size with the contact fitted beside it: the report says so
+    (the unmodified model it beat is the model's mass on a fitted contact)."""
+    test = dict(name=MASS.label(), value=0.3, size=0.5, z_vs_none=3.1, z_vs_size=2.9,
+                beyond=True, fitted_beside=["stiffness_calibration[contacts]"])
+    text = ambiguity_summary(dict(beyond_size=[test]))
+    assert "each with stiffness_calibration[contacts] fitted beside it" in text
+    assert "fitted beside" not in ambiguity_summary(dict(beyond_size=[
+        {k: v for k, v in test.items() if k != "fitted_beside"}]))

@@ -497,7 +497,9 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None, siz
             else size_none()[2]
         tests.append(dict(name=c.label(), value=v, size=float(side[0]),
                           z_vs_none=float(cluster_z(none_c, fit_c, size_prob.z_stat)),
-                          z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat))))
+                          z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat)),
+                          **(dict(fitted_beside=[x.label() for x in sized.reference(c).cands[1:]])
+                             if profiled else {})))
         members.append((a, f))
     if not tests:
         return None

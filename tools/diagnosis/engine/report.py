@@ -181,7 +181,9 @@ def ambiguity_summary(report) -> str:
         out += (f" Beyond its size that matters on held-out windows the fit never used: "
                 f"{b['name']} = {_fmt(b['value'])} beats both the unmodified model (cluster "
                 f"z {b['z_vs_none']:.2f}) and the model fixed at {_fmt(b['size'])} (z "
-                f"{b['z_vs_size']:.2f}), so `none` is not kept beside it.")
+                f"{b['z_vs_size']:.2f})"
+                + (f", each with {', '.join(b['fitted_beside'])} fitted beside it"
+                   if b.get("fitted_beside") else "") + ", so `none` is not kept beside it.")
     gone = [r for r in report.get("left_out_rivals", []) if r["dropped"]]
     if gone:
         out += (" Clearly worse than another effect of the set on held-out windows the "
