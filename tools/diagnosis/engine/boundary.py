@@ -17,11 +17,6 @@ and the fit's own value, where it lies beyond that size, is not better than `non
 cost that is not monotone in the effect keeps the interval's answer). Nothing is fitted
 at the tested value, so all held-out windows are used once. z_excl is evidence.size_z:
 one test per effect at 5 %, not shared among the effects as the rival rule's bar is.
-
-On development draw 90009 (clean) mu 0.5 scored z -0.82 and drag 0.1 z -1.29 on one
-recording, mu 0.5 z -0.29 after the follow-up, so neither was excluded and the verdict
-did not change. The ninth evaluation set ran with the test (EVAL_SEEDS.md); how often
-it excluded an effect there was not recorded (the harness rows hold it from 388bf2d on).
 """
 from __future__ import annotations
 
@@ -455,19 +450,14 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None, siz
     bias, whose sizes are not the model's values (in_model_units). Recorded as
     judged["beyond_size"].
 
-    sized (profiled_size.Sizer): for an effect with nuisances it trades against
-    (spec.size_profile: the ball's mass and the contact's stiffness and relaxation time)
-    the fit's value, `none` and the size are each scored with those nuisances fitted
-    beside them (`none` as Sizer.reference: the model's mass, the contact fitted), so the
-    test compares the effect alone, as the size tests do. Scored at the kept nuisances,
-    on the forty-fifth set's 102425 (EE-ball mu 0.67, below its size, on a contact 0.24x
-    as stiff as the model's) a mass of 0.23x beat `none` and 0.5x at z +4.5 and +4.8 and
-    took the right `none` out of the set.
-
-    With two or more members left the lead (the member shown beyond its size by the
-    widest margin) is returned too, the verdict staying ambiguous: the answer is then a
-    member of the set, never the `none` the set no longer holds (102425 answered `none`
-    beside {mass, table offset})."""
+    sized (profiled_size.Sizer): an effect with nuisances it trades against
+    (spec.size_profile: the ball's mass, the contact's stiffness and relaxation time) is
+    scored at its value, at `none` (Sizer.reference) and at the size with those fitted
+    beside each, as the size tests do: at the kept nuisances the forty-fifth set's 102425
+    (EE-ball mu 0.67, below size, on a 0.24x-stiff contact) had a 0.23x mass beat `none`
+    at z +4.5 and lose the right `none`. With two or more members left, the lead is
+    returned too (the verdict stays ambiguous), so the answer is never a `none` the set
+    no longer holds."""
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     from adaptive_c3.tools.diagnosis.engine.proposals import (DEFAULT_SEPARATION,
                                                              MORE_EVIDENCE, proposal)
