@@ -479,17 +479,17 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None, siz
         side = [s for s, d in size_sides(c, spec, nominal, size) if d * (v - s) >= 0.0]
         if not side:
             continue
-        profiled = hasattr(sized, "reference") and sized.reference(c) is not None
-        fit_c = evaluate(size_prob, sized(c, float(f.values[0])) if profiled else f)[2]
+        ref = sized.reference(c) if hasattr(sized, "reference") else None   # profiled
+        fit_c = evaluate(size_prob, f if ref is None else sized(c, float(f.values[0])))[2]
         size_c = at_size(size_prob, c, side[0] - add, None, per_cluster=True,
-                         sized=sized if profiled else None)
-        none_c = sized.reference_ssr(size_prob, c, size_none()[2]) if profiled \
-            else size_none()[2]
+                         sized=None if ref is None else sized)
+        none_c = size_none()[2] if ref is None else \
+            sized.reference_ssr(size_prob, c, size_none()[2])
         tests.append(dict(name=c.label(), value=v, size=float(side[0]),
                           z_vs_none=float(cluster_z(none_c, fit_c, size_prob.z_stat)),
                           z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat)),
-                          **(dict(fitted_beside=[x.label() for x in sized.reference(c).cands[1:]])
-                             if profiled else {})))
+                          **({} if ref is None else
+                             dict(fitted_beside=[x.label() for x in ref.cands[1:]]))))
         members.append((a, f))
     if not tests:
         return None
