@@ -481,10 +481,8 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None, siz
             continue
         ref = sized.reference(c) if hasattr(sized, "reference") else None   # profiled
         fit_c = evaluate(size_prob, f if ref is None else sized(c, float(f.values[0])))[2]
-        size_c = at_size(size_prob, c, side[0] - add, None, per_cluster=True,
-                         sized=None if ref is None else sized)
-        none_c = size_none()[2] if ref is None else \
-            sized.reference_ssr(size_prob, c, size_none()[2])
+        size_c = at_size(size_prob, c, side[0] - add, None, per_cluster=True, sized=sized)
+        none_c = _reference(size_prob, c, size_none(), sized)
         tests.append(dict(name=c.label(), value=v, size=float(side[0]),
                           z_vs_none=float(cluster_z(none_c, fit_c, size_prob.z_stat)),
                           z_vs_size=float(cluster_z(size_c, fit_c, size_prob.z_stat)),
