@@ -123,3 +123,14 @@ def test_the_report_says_what_was_fitted_beside_a_profiled_effect():
     assert "each with stiffness_calibration[contacts] fitted beside it" in text
     assert "fitted beside" not in ambiguity_summary(dict(beyond_size=[
         {k: v for k, v in test.items() if k != "fitted_beside"}]))
+
+
+def test_the_beyond_size_fit_answers_when_named_or_when_nothing_was_chosen():
+    from adaptive_c3.tools.diagnosis.diagnose import answers_beyond_size
+    shown, chosen = object(), object()
+    assert answers_beyond_size(shown, chosen, "named")           # alone beyond its size
+    assert answers_beyond_size(shown, None, "ambiguous")         # leads a set `none` left
+    assert not answers_beyond_size(shown, chosen, "ambiguous")   # a chosen effect stays
+    assert not answers_beyond_size(None, chosen, "named")
+    assert not answers_beyond_size(None, None, "ambiguous")
+    assert not answers_beyond_size(chosen, chosen, "named")      # already the answer

@@ -65,6 +65,15 @@ HORIZON = 10          # rollout steps for fitting, locating and the reported err
 BLOCK_STEPS = 200     # longest time block for cross-validation of 1-2 episode recordings
 
 
+def answers_beyond_size(shown, chosen, verdict: str) -> bool:
+    """Whether beyond_size's fit `shown` becomes the answer: when it is named (beyond its
+    size, alone in the set once `none` left), or when it leads a set `none` left and
+    nothing was chosen (the answer is then never a `none` the set no longer holds). An
+    effect already chosen stays when the set is still ambiguous."""
+    return shown is not None and shown is not chosen and (verdict == "named"
+                                                          or chosen is None)
+
+
 def _user_error(msg):
     from adaptive_c3.tools.user_input import UserError
     return UserError(msg)
@@ -335,9 +344,7 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
         chosen = None
         judged["ambiguous"].sort(key=lambda a: a["name"] != "none")    # `none` leads
     shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift, sized)
-    # named: beyond its size there; or the lead of a set `none` left, where none answered
-    if shown is not None and shown is not chosen and (judged["verdict"] == "named"
-                                                      or chosen is None):
+    if answers_beyond_size(shown, chosen, judged["verdict"]):
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)
     def may_lead(f) -> bool:         # widened as the chosen one was, then may it answer
