@@ -1,5 +1,5 @@
 """Issue 30: `none` leaves an ambiguous set when one of its effects is shown on the windows
-the fit left out to lie beyond its size that matters (engine/boundary.py beyond_size),
+the fit left out to lie beyond its size that matters (engine/beyond_size.py),
 where the linearised interval, wide on a staircase cost, cannot say."""
 import functools
 
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-from adaptive_c3.tools.diagnosis.engine.boundary import beyond_size
+from adaptive_c3.tools.diagnosis.engine.beyond_size import answers_beyond_size, beyond_size
 from adaptive_c3.tools.diagnosis.engine.evidence import (fit_row, not_excluded, verdict,
                                                         worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Fit, evaluate
@@ -126,7 +126,6 @@ def test_the_report_says_what_was_fitted_beside_a_profiled_effect():
 
 
 def test_the_beyond_size_fit_answers_when_named_or_when_nothing_was_chosen():
-    from adaptive_c3.tools.diagnosis.diagnose import answers_beyond_size
     shown, chosen = object(), object()
     assert answers_beyond_size(shown, chosen, "named")           # alone beyond its size
     assert answers_beyond_size(shown, None, "ambiguous")         # leads a set `none` left

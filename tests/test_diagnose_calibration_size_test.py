@@ -9,8 +9,8 @@ import numpy as np
 
 from adaptive_c3.scenarios.schema import SCENARIO_DIR, load_scenario
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-from adaptive_c3.tools.diagnosis.engine.boundary import (at_size, beyond_size,
-                                                        calibration_under)
+from adaptive_c3.tools.diagnosis.engine.beyond_size import beyond_size
+from adaptive_c3.tools.diagnosis.engine.boundary import at_size, calibration_under
 from adaptive_c3.tools.diagnosis.engine.evidence import not_excluded, verdict
 from adaptive_c3.tools.diagnosis.engine.fit import Problem
 from adaptive_c3.tools.diagnosis.engine.locate import Windows

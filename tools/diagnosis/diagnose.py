@@ -47,10 +47,10 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windo
                                                   window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
-from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, beyond_size,
-                                                         confirm_on_left_out,
+from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, confirm_on_left_out,
                                                          left_out_scores, ruled_out_members,
                                                          size_test_problem)
+from adaptive_c3.tools.diagnosis.engine.beyond_size import answers_beyond_size, beyond_size
 from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
 from adaptive_c3.tools.diagnosis.engine.user_model_check import per_episode_ssr, worse_than_user
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
@@ -63,15 +63,6 @@ from adaptive_c3.tools.recording import RecordingError, load_recording
 
 HORIZON = 10          # rollout steps for fitting, locating and the reported errors
 BLOCK_STEPS = 200     # longest time block for cross-validation of 1-2 episode recordings
-
-
-def answers_beyond_size(shown, chosen, verdict: str) -> bool:
-    """Whether beyond_size's fit `shown` becomes the answer: when it is named (beyond its
-    size, alone in the set once `none` left), or when it leads a set `none` left and
-    nothing was chosen (the answer is then never a `none` the set no longer holds). An
-    effect already chosen stays when the set is still ambiguous."""
-    return shown is not None and shown is not chosen and (verdict == "named"
-                                                          or chosen is None)
 
 
 def _user_error(msg):

@@ -36,7 +36,7 @@ diagnosed and scored:
                  (a record; no answer depends on it)
   beyond_size    each member beside `none` whose value lies beyond its size: its fit
                  against `none` and against the size there, and whether `none` left
-                 (engine/boundary.py beyond_size)
+                 (engine/beyond_size.py)
   left_out_rivals  each effect beside the chosen one: the chosen fit against it on the
                  windows the fit left out, and whether it left the set
                  (engine/left_out_rivals.py)
