@@ -158,7 +158,8 @@ def favoured_alone(prob, fit, sides, none_eval, z_excl, parts, sized=None) -> li
     out = []
     for s, _ in sides:
         ssr = at_size(prob, cand, s, none_eval, per_cluster=True, sized=sized)
-        z, each = _z_of(size_reference_ssr(prob, cand, none_eval, sized), ssr, prob.z_stat, groups)
+        base = size_reference_ssr(prob, cand, none_eval, sized)
+        z, each = _z_of(base, ssr, prob.z_stat, groups)
         if max([z, *each]) < bar:
             continue
         z_own, each_own = _z_of(own(), ssr, prob.z_stat, groups)
