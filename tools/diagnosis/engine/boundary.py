@@ -150,15 +150,15 @@ def favoured_alone(prob, fit, sides, none_eval, z_excl, parts, sized=None) -> li
     (the fortieth set's 101932, EE-ball mu 0.56: mu 0.5 beat the model's 1 at z +4.2,
     interval 0.51..0.70), while the fit's value beats the size there."""
     groups, bar = _recordings_and_bar(parts, z_excl)
-    if prob is None or not groups or len(fit.cands) != 1:
+    if prob is None or not groups or len(fit.cands) != 1 or not sides:
         return []
     cand = fit.cands[0]
     own = functools.cache(lambda: at_size(prob, cand, float(fit.values[0]), none_eval,
                                           per_cluster=True))
+    base = size_reference_ssr(prob, cand, none_eval, sized)   # the same for every side
     out = []
     for s, _ in sides:
         ssr = at_size(prob, cand, s, none_eval, per_cluster=True, sized=sized)
-        base = size_reference_ssr(prob, cand, none_eval, sized)
         z, each = _z_of(base, ssr, prob.z_stat, groups)
         if max([z, *each]) < bar:
             continue
