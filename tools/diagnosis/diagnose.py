@@ -44,13 +44,14 @@ from adaptive_c3.tools.diagnosis.engine.evidence import (Z_AMBIG, evidence_windo
                                                   free_ball_verdict, not_excluded,
                                                   may_answer, require_support, strike_onsets,
                                                   top_pushes_only, widen_for_phases,
-                                                  window_phases, worse_z)
+                                                  size_z, window_phases, worse_z)
 from adaptive_c3.tools.diagnosis.engine.fit import Problem, evaluate, widen_for_nuisance
 from adaptive_c3.tools.diagnosis.engine.selection import MIN_REDUCTION, fit_nuisance, select
 from adaptive_c3.tools.diagnosis.engine.boundary import (below_size, confirm_on_left_out,
                                                          left_out_scores, ruled_out_members,
                                                          size_test_problem)
 from adaptive_c3.tools.diagnosis.engine.beyond_size import answers_beyond_size, beyond_size
+from adaptive_c3.tools.diagnosis.engine.direct_reading import read_directly, shown_directly
 from adaptive_c3.tools.diagnosis.engine.left_out_rivals import rivals_on_left_out
 from adaptive_c3.tools.diagnosis.engine.user_model_check import per_episode_ssr, worse_than_user
 from adaptive_c3.tools.diagnosis.engine.held_out import widen_to_held_out
@@ -330,11 +331,13 @@ def _diagnose(rec, spec, base, horizon, progress, pairs) -> dict:
     not_excluded(judged, spec, fits, none_eval, fits_free, shift=shift, prob=prob,
                  size_prob=left_out, size_none=left_none, part_of_row=rec.extras.get("part"),
                  sized=sized)
+    read_directly(judged, spec, rec, size_z())    # a size read from the data, no model
     gone = ruled_out_members(judged)     # every size that matters ruled out: too small
     if chosen is not None and chosen.label() in gone:
         chosen = None
         judged["ambiguous"].sort(key=lambda a: a["name"] != "none")    # `none` leads
-    shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift, sized)
+    shown = beyond_size(judged, spec, fits, left_out, left_none, worse_z, shift, sized) \
+        or shown_directly(judged, fits)
     if answers_beyond_size(shown, chosen, judged["verdict"]):
         chosen = shown
         widen(prob, none_eval, chosen, judged, user_base, nuisance)

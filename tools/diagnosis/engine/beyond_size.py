@@ -80,8 +80,14 @@ def beyond_size(judged, spec, fits, size_prob, size_none, z_bar, shift=None, siz
                    key=lambda i: -tests[i]["z_vs_size"])
     if not shown:
         return None
-    first, fit = members[shown[0]]
-    rest = [a for a in amb if a["name"] != "none" and a is not first]
+    return take_none_out(judged, *members[shown[0]])
+
+
+def take_none_out(judged, first, fit):
+    """`none` leaves the ambiguous set, `first` (a member, its fit `fit`) shown beyond its
+    size: named when it is then alone, else it leads the rest (the verdict stays
+    ambiguous, the proposals now separate it from each of them); returns fit."""
+    rest = [a for a in judged["ambiguous"] if a["name"] != "none" and a is not first]
     if not rest:
         judged.update(verdict="named", ambiguous=[], separating_excitation=[])
         return fit

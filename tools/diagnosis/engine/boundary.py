@@ -386,8 +386,9 @@ def below_size(judged, spec, chosen, fits=(), shift=None) -> bool:
 def ruled_out_members(judged) -> list[str]:
     """Take out of an ambiguous set that holds `none` each effect whose sizes that matter
     were all ruled out (evidence.not_excluded's size tests: each size its interval
-    reaches, the model fixed there, clearly worse than `none` on the held-out windows);
-    returns their labels. `none` beside an effect says it may be too small to matter, and
+    reaches, the model fixed there, clearly worse than `none` on the held-out windows),
+    or whose direct reading lies within its size (engine/direct_reading.py); returns
+    their labels. `none` beside an effect says it may be too small to matter, and
     the tests say it is: the counterpart of below_size, read from the model at its sizes
     rather than from the linearised interval. On the thirty-fifth set's clean draw 101411,
     after its follow-up, a ball mass of 1.4x [0.04, 2.76] led a set with `none` although
@@ -397,7 +398,8 @@ def ruled_out_members(judged) -> list[str]:
     if judged.get("verdict") != "ambiguous" or not any(a["name"] == "none" for a in amb):
         return []
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
-    out = {t["name"] for t in judged.get("size_tests", []) if t["excluded"]}
+    out = {t["name"] for t in judged.get("size_tests", []) if t["excluded"]} | {
+        r["name"] for r in judged.get("direct_readings", []) if r["within"]}   # direct_reading
     gone = [a for a in amb if a["name"] != "none"
             and Candidate(a["name"], a["target"]).label() in out]
     if not gone:

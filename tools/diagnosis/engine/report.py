@@ -130,7 +130,7 @@ def _judged(result) -> dict:
     return {k: j[k] for k in ("verdict", "ambiguous", "separating_excitation", "evidence",
                               "size_tests", "confirmation", "left_out", "below_size",
                               "beyond_size", "left_out_rivals", "against_user_model",
-                              "ruled_out_members")
+                              "ruled_out_members", "direct_readings")
             if k in j}
 
 
@@ -159,6 +159,16 @@ def ambiguity_summary(report) -> str:
                 f"worse than without it on held-out windows): {', '.join(ruled)}"
                 + (f"; so not kept beside `none`: {', '.join(report['ruled_out_members'])}."
                    if report.get("ruled_out_members") else "."))
+    for r in report.get("direct_readings", []):
+        out += (f" Read from the recording's momentum balance, no contact model: {r['name']} "
+                f"= {_fmt(r['value'])} (interval {_fmt(r['interval'][0])} to "
+                f"{_fmt(r['interval'][1])}, {r['windows']} windows of {r['episodes']} "
+                f"episodes), " + ("within its size that matters "
+                                  if r["within"] else "beyond its size that matters "
+                                  if r["beyond"] else "reaching its size that matters ")
+                + f"({_fmt(r['sizes'][0])} to {_fmt(r['sizes'][1])})"
+                + ("; so not kept beside `none`." if r["within"] else
+                   "; so `none` is not kept beside it." if r["beyond"] else "."))
     for b in report.get("below_size", []):
         lo, hi = b["ci95"]
         out += (f" Found {b['name']} = {_fmt(b['value'])} {b['unit']} (95% interval "

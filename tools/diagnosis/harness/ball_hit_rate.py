@@ -34,6 +34,9 @@ diagnosed and scored:
                  was ruled out, taken out of it (engine/boundary.py ruled_out_members)
   left_out       each single member beside `none`: its own fit against `none` there
                  (a record; no answer depends on it)
+  direct_readings  each member beside `none` the task read from the recording with no
+                 model (the ball's mass: momentum balance), within / beyond its size
+                 (engine/direct_reading.py)
   beyond_size    each member beside `none` whose value lies beyond its size: its fit
                  against `none` and against the size there, and whether `none` left
                  (engine/beyond_size.py)
@@ -133,6 +136,12 @@ def _summary(rows) -> dict:
         beyond_size=dict(tested=count(lambda r: r.get("beyond_size")),
                          none_out=count(lambda r: any(t["beyond"] for t in
                                                       r.get("beyond_size") or []))),
+        # members beside `none` read directly from the recording (engine/direct_reading.py):
+        # read, ruled out within their size, `none` taken out beyond it
+        direct_readings=dict(
+            read=count(lambda r: r.get("direct_readings")),
+            within=count(lambda r: any(x["within"] for x in r.get("direct_readings") or [])),
+            beyond=count(lambda r: any(x["beyond"] for x in r.get("direct_readings") or []))),
         # rivals of the chosen effect tested on the left-out windows, dropped, and
         # dropped while they were the truth (engine/left_out_rivals.py)
         left_out_rivals=_left_out_rivals(rows),

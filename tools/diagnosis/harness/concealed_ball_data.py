@@ -424,6 +424,7 @@ def judged_fields(result, truth) -> dict:
                 size_tests=list(j.get("size_tests", [])),
                 confirmation=j.get("confirmation"), left_out=j.get("left_out"),
                 beyond_size=j.get("beyond_size"), left_out_rivals=j.get("left_out_rivals"),
+                direct_readings=j.get("direct_readings"),
                 against_user_model=j.get("against_user_model"),
                 ambiguous_notes=[a.get("note") or a.get("reason", "")
                                  for a in j.get("ambiguous", [])],

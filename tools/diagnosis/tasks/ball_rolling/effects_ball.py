@@ -232,6 +232,18 @@ class BallSpec(SystemSpec):
         self.cache.pop("JcF", None)
         self.cache.update(key=key, psmooth=psmooth, phi=phi, Jn=Jn, Jt=Jt, JnP=JnP, pstar=pstar, Nq=Nq)
 
+    def direct_reading(self, cand, rec):
+        """The ball's mass (a factor of the model's) read from the recording's momentum
+        balance with no contact model (momentum_audit.py), for engine/direct_reading.py;
+        None for any other effect or too little contact in the recording."""
+        if cand.name != "mass_scale" or cand.target != "ball":
+            return None
+        from adaptive_c3.tools.diagnosis.tasks.ball_rolling.momentum_audit import mass_reading
+        p = self.params
+        episode = np.zeros(len(rec.t), np.int64) if rec.episode is None else rec.episode
+        return mass_reading(rec.x, rec.u, episode, self.dt, ball_mass=p.ball_mass,
+                            ee_mass=p.ee_mass, ee_radius=p.ee_radius, ball_radius=p.ball_radius)
+
     def custom_patch(self, effects) -> "BallPatched":
         return ball_patch(self, effects)
 
