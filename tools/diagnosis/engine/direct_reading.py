@@ -11,7 +11,8 @@ the forty-sixth and forty-seventh sets (all with `none` the right answer). A tas
 read the effect from a balance that holds whatever the contact model (the ball task: the
 EE's impulses against the ball's angular momentum about its table contact,
 tasks/ball_rolling/momentum_audit.py) offers it as spec.direct_reading(cand, rec) -> a
-reading with `.scale`, `.sd` and `.interval(z)`, or None.
+reading with `.scale`, `.sd`, `.interval(z)` and `.details()` (a dict the record adds),
+or None.
 
 The tests: the reading's interval at evidence.size_z (one-sided 5 % on each side, as
 the rollout size tests; widened by the reading's own model-form error) lies within the
