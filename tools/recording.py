@@ -27,6 +27,11 @@ class Recording:
     episode: np.ndarray | None = None
     extras: dict = field(default_factory=dict)
 
+    def episode_ids(self) -> np.ndarray:
+        """[T] each row's episode id (0 throughout for a recording without ids)."""
+        return np.zeros(len(self.t), np.int64) if self.episode is None \
+            else np.asarray(self.episode)
+
     def episodes(self):
         """Yield (episode id, index array) per episode, in order of first appearance."""
         if self.episode is None:
@@ -68,8 +73,7 @@ def concat_recordings(recs) -> Recording:
                                  "names")
     eps, offset = [], 0
     for r in recs:
-        e = np.zeros(len(r.t), np.int64) if r.episode is None else np.asarray(r.episode)
-        _, ids = np.unique(e, return_inverse=True)
+        _, ids = np.unique(r.episode_ids(), return_inverse=True)
         eps.append(ids + offset)
         offset += int(ids.max()) + 1 if len(ids) else 0
     return Recording(t=np.concatenate([r.t for r in recs]),

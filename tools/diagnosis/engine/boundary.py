@@ -383,6 +383,13 @@ def below_size(judged, spec, chosen, fits=(), shift=None) -> bool:
     return True
 
 
+def holds_none(judged) -> bool:
+    """Whether the verdict is ambiguous with `none` in its set: where a member's size
+    decides whether it stays beside `none` (ruled_out_members, direct_reading)."""
+    return judged.get("verdict") == "ambiguous" and any(
+        a["name"] == "none" for a in judged.get("ambiguous") or [])
+
+
 def ruled_out_members(judged) -> list[str]:
     """Take out of an ambiguous set that holds `none` each effect whose sizes that matter
     were all ruled out (evidence.not_excluded's size tests: each size its interval
@@ -395,7 +402,7 @@ def ruled_out_members(judged) -> list[str]:
     the ball at 0.5x and at 2x was worse than `none` at z -3.7 and -4.1. When `none` alone
     is left the verdict is `none`."""
     amb = judged.get("ambiguous") or []
-    if judged.get("verdict") != "ambiguous" or not any(a["name"] == "none" for a in amb):
+    if not holds_none(judged):
         return []
     from adaptive_c3.tools.diagnosis.backends.effects import Candidate
     out = {t["name"] for t in judged.get("size_tests", []) if t["excluded"]} | {

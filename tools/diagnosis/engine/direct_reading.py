@@ -24,20 +24,18 @@ from __future__ import annotations
 
 from adaptive_c3.tools.diagnosis.backends.effects import Candidate
 from adaptive_c3.tools.diagnosis.engine.beyond_size import take_none_out
-from adaptive_c3.tools.diagnosis.engine.boundary import size_that_matters
+from adaptive_c3.tools.diagnosis.engine.boundary import holds_none, size_that_matters
 
 
 def read_directly(judged, spec, rec, z: float) -> list[dict]:
     """Read each member of an ambiguous set holding `none` that the task can read
     directly (spec.direct_reading); records judged["direct_readings"] (name, value, sd,
     interval, the sizes, within / beyond) and returns it ([] when nothing was read)."""
-    amb = judged.get("ambiguous") or []
     read = getattr(spec, "direct_reading", None)
-    if read is None or judged.get("verdict") != "ambiguous" \
-            or not any(a["name"] == "none" for a in amb):
+    if read is None or not holds_none(judged):
         return []
     out = []
-    for a in amb:
+    for a in judged["ambiguous"]:
         if a["name"] == "none":
             continue
         c = Candidate(a["name"], a["target"])
@@ -61,12 +59,11 @@ def shown_directly(judged, fits):
     """Take `none` out of an ambiguous set when a member's direct reading lies beyond its
     size that matters; returns that member's fit (the answer when it is then alone, else
     the lead of the set), or None."""
-    amb = judged.get("ambiguous") or []
-    if judged.get("verdict") != "ambiguous" or not any(a["name"] == "none" for a in amb):
+    if not holds_none(judged):
         return None
     beyond = {r["name"] for r in judged.get("direct_readings", []) if r["beyond"]}
     by_label = {f.label(): f for f in fits if len(f.cands) == 1}
-    for a in amb:
+    for a in judged["ambiguous"]:
         label = Candidate(a["name"], a["target"]).label() if a["name"] != "none" else None
         if label in beyond and label in by_label:
             return take_none_out(judged, a, by_label[label])

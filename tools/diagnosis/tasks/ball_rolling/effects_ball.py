@@ -240,8 +240,7 @@ class BallSpec(SystemSpec):
             return None
         from adaptive_c3.tools.diagnosis.tasks.ball_rolling.momentum_audit import mass_reading
         p = self.params
-        episode = np.zeros(len(rec.t), np.int64) if rec.episode is None else rec.episode
-        return mass_reading(rec.x, rec.u, episode, self.dt, ball_mass=p.ball_mass,
+        return mass_reading(rec.x, rec.u, rec.episode_ids(), self.dt, ball_mass=p.ball_mass,
                             ee_mass=p.ee_mass, ee_radius=p.ee_radius, ball_radius=p.ball_radius)
 
     def custom_patch(self, effects) -> "BallPatched":

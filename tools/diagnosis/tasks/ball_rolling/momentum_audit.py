@@ -68,11 +68,6 @@ class MassReading:
         return dict(delay_s=self.delay_s, windows=self.windows, episodes=self.episodes)
 
 
-def _z_cross(v: np.ndarray) -> np.ndarray:
-    """z x v for rows of 3-vectors."""
-    return np.stack([-v[..., 1], v[..., 0], np.zeros(v.shape[:-1])], -1)
-
-
 def window_sums(x, u, episode, dt: float, ee_mass: float, ee_radius: float,
                 ball_radius: float, max_force: float = MAX_FORCE):
     """(L [N, 2], K [N, 2], D [N, 2], episode [N]) of the windows the audit reads: the
@@ -96,7 +91,8 @@ def window_sums(x, u, episode, dt: float, ee_mass: float, ee_radius: float,
     moment = np.cross(lever, J) * contact[:, None]
     du = np.r_[np.zeros((1, 3)), u[1:-1] - u[:-2]]
     delay = np.cross(lever, du) * contact[:, None]
-    bracket = 0.4 * ball_radius ** 2 * (w[1:] - w[:-1]) + ball_radius * _z_cross(vb[1:] - vb[:-1])
+    bracket = 0.4 * ball_radius ** 2 * (w[1:] - w[:-1]) \
+        + ball_radius * np.cross([0.0, 0.0, 1.0], vb[1:] - vb[:-1])
     force = np.linalg.norm(J, axis=1) / dt
     out = []
     k, T = 0, len(ok)
